@@ -1,0 +1,67 @@
+# rotstar-mrcal: set-up, tests, demo and benchmark.
+# Everything installs itself: a Python >= 3.12 interpreter is found (PATH or pyenv),
+# uv is bootstrapped from PyPI if missing, the locked environment goes to .venv,
+# and Debian packages (mrgingham) are installed with apt-get when absent.
+
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+export UV_PYTHON_DOWNLOADS := never
+export UV_PROJECT_ENVIRONMENT := $(CURDIR)/.venv
+
+VENV_BIN := $(CURDIR)/.venv/bin
+# mrcal's wheel ships gnuplot in the venv's bin: put it first for --hardcopy plots
+RUN := PATH="$(VENV_BIN):$$PATH"
+PYTEST_ARGS ?=
+DEMO_DIR ?= demo-out
+BENCH_ARGS ?=
+
+# The first candidate that really runs and is >= 3.12 (pyenv shims can exist and fail).
+PYTHON := $(shell for c in python3.13 python3.12 $$(ls -d $$(pyenv root 2>/dev/null)/versions/3.1[2-9]*/bin/python3 2>/dev/null | sort -rV) /usr/bin/python3.13 /usr/bin/python3.12 python3; do \
+	  if "$$c" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 12) else 1)' >/dev/null 2>&1; then command -v "$$c" || echo "$$c"; break; fi; done)
+
+UV := $(shell command -v uv 2>/dev/null || ( [ -x $(CURDIR)/.tools/bin/uv ] && echo $(CURDIR)/.tools/bin/uv ))
+ifeq ($(UV),)
+UV := $(CURDIR)/.tools/bin/uv
+endif
+
+.PHONY: help setup test demo bench clean check-python system-deps
+
+help:
+	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
+	@echo "make test   - run the test suite (all set-up included)"
+	@echo "make bench  - accuracy and speed benchmark against OpenCV and mrgingham"
+
+check-python:
+	@if [ -z "$(PYTHON)" ]; then \
+	  echo "error: no working Python >= 3.12 found (tried python3.13, python3.12, pyenv versions, python3); mrcal's wheels need CPython >= 3.12" >&2; exit 1; fi
+
+$(CURDIR)/.tools/bin/uv: | check-python
+	@echo "installing uv into .tools (from PyPI)" >&2
+	$(PYTHON) -m venv $(CURDIR)/.tools
+	$(CURDIR)/.tools/bin/pip install -q uv
+
+system-deps:
+	@missing=""; command -v mrgingham >/dev/null || missing="$$missing mrgingham"; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing" >&2; \
+	  if [ "$$(id -u)" = 0 ]; then (apt-get update -qq && apt-get install -y -qq $$missing) >&2 || echo "warning: could not install$$missing; its baseline will be skipped" >&2; \
+	  else echo "warning: not root, cannot apt-get install$$missing; its baseline will be skipped" >&2; fi; \
+	fi
+
+.venv/.synced: pyproject.toml uv.lock $(UV) | check-python
+	$(UV) sync --frozen --python $(PYTHON)
+	@touch $@
+
+setup: .venv/.synced system-deps
+
+test: setup
+	$(RUN) $(VENV_BIN)/python -m pytest -q $(PYTEST_ARGS)
+
+demo: setup
+	$(RUN) $(VENV_BIN)/python scripts/demo.py --out $(DEMO_DIR)
+
+bench: setup
+	$(RUN) $(VENV_BIN)/python scripts/bench.py $(BENCH_ARGS)
+
+clean:
+	rm -rf .venv .tools $(DEMO_DIR) .pytest_cache

@@ -1,0 +1,173 @@
+"""A recorded dataset: seq/pattern.json and one folder of frames per pose
+
+SYNOPSIS
+
+    >>> import tempfile, numpy as np
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> from rotstar_mrcal import dataset
+    >>> seq = tempfile.mkdtemp()
+    >>> layout = make_layout(screen=(800, 600), pitch=100, band=24)
+    >>> dataset.write_pattern(seq, layout)
+    >>> frames = {f["file"]: np.zeros((40, 60), np.uint16) for f in layout.frames()}
+    >>> dataset.write_pose(seq, "pose000", frames)
+    >>> dataset.list_poses(seq)
+    ['pose000']
+    >>> pose = dataset.load_pose(seq, "pose000", dataset.read_pattern(seq)[1])
+    >>> pose.rotstar.shape, pose.checkerboard.shape, pose.full_scale
+    ((8, 40, 60), (40, 60), 65535.0)
+
+Layout on disk:
+
+    seq/pattern.json              a copy of what rotstar-pattern wrote
+    seq/<pose>/<file>             one image per entry of pattern.json "frames",
+                                  with the same file names; 8- or 16-bit
+                                  single-channel PNG
+
+Pose folders are the sub-folders that hold at least one of the frame files;
+they are processed in sorted order. Problems are raised as DatasetError with
+a one-line message that names the file and the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+
+import cv2
+import numpy as np
+
+from .pattern.layout import Layout, layout_from_dict
+
+
+class DatasetError(Exception):
+    """Bad input: the message is one line naming the file and the reason"""
+
+
+@dataclasses.dataclass
+class Pose:
+    """The frames of one pose, as recorded"""
+
+    name: str
+    folder: str
+    rotstar: np.ndarray  # (nframes, H, W) float32, in recorded units
+    checkerboard: np.ndarray | None  # (H, W) float32 or None
+    full_scale: float  # 255 or 65535
+    files: list[str]  # paths of the rotstar frames, in order
+
+    @property
+    def first_file(self) -> str:
+        return self.files[0]
+
+
+def read_pattern(path: str) -> tuple[dict, Layout]:
+    """Read pattern.json from a dataset folder (or the file itself)"""
+    fn = os.path.join(path, "pattern.json") if os.path.isdir(path) else path
+    if not os.path.exists(fn):
+        raise DatasetError(f"{fn}: no pattern.json (copy the one rotstar-pattern wrote into the dataset folder)")
+    try:
+        with open(fn) as f:
+            d = json.load(f)
+    except (OSError, json.JSONDecodeError) as e:
+        raise DatasetError(f"{fn}: cannot read pattern.json ({e})") from None
+    try:
+        return d, layout_from_dict(d)
+    except ValueError as e:
+        raise DatasetError(f"{fn}: {e}") from None
+
+
+def write_pattern(seq: str, layout: Layout) -> str:
+    os.makedirs(seq, exist_ok=True)
+    fn = os.path.join(seq, "pattern.json")
+    with open(fn, "w") as f:
+        f.write(layout.to_json())
+    return fn
+
+
+def list_poses(seq: str, frames: list[dict] | None = None) -> list[str]:
+    """Sorted names of the pose folders in seq"""
+    if frames is None:
+        frames = read_pattern(seq)[0]["frames"]
+    names = {f["file"] for f in frames}
+    try:
+        entries = sorted(os.listdir(seq))
+    except OSError as e:
+        raise DatasetError(f"{seq}: cannot list the dataset folder ({e.strerror})") from None
+    return [
+        e
+        for e in entries
+        if os.path.isdir(os.path.join(seq, e)) and names & set(os.listdir(os.path.join(seq, e)))
+    ]
+
+
+def read_image(fn: str) -> tuple[np.ndarray, float]:
+    """A grayscale 8- or 16-bit PNG as float32, and its full scale"""
+    if not os.path.exists(fn):
+        raise DatasetError(f"{fn}: missing frame")
+    img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise DatasetError(f"{fn}: not a readable image (corrupt or not PNG)")
+    if img.ndim == 3:
+        if img.shape[2] == 4:
+            img = img[..., :3]
+        if not (np.array_equal(img[..., 0], img[..., 1]) and np.array_equal(img[..., 0], img[..., 2])):
+            raise DatasetError(f"{fn}: colour image; frames must be single-channel grayscale")
+        img = img[..., 0]
+    if img.dtype == np.uint8:
+        return img.astype(np.float32), 255.0
+    if img.dtype == np.uint16:
+        return img.astype(np.float32), 65535.0
+    raise DatasetError(f"{fn}: pixel type {img.dtype}; expected 8- or 16-bit grayscale")
+
+
+def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
+    """Read one pose's frames; DatasetError on missing, unreadable or mismatched files"""
+    frames = layout_or_frames.frames() if isinstance(layout_or_frames, Layout) else layout_or_frames
+    folder = os.path.join(seq, pose)
+    expected = {f["file"] for f in frames}
+    present = {e for e in os.listdir(folder) if e.lower().endswith(".png")}
+    extra = sorted(present - expected)
+    if extra:
+        raise DatasetError(f"{os.path.join(folder, extra[0])}: extra frame not in pattern.json")
+    rot_files = [os.path.join(folder, f["file"]) for f in frames if f["kind"] == "rotstar"]
+    imgs, scales = [], set()
+    for fn in rot_files:
+        img, fs = read_image(fn)
+        imgs.append(img)
+        scales.add(fs)
+    shapes = {im.shape for im in imgs}
+    if len(shapes) > 1:
+        raise DatasetError(
+            f"{rot_files[[im.shape for im in imgs].index(sorted(shapes)[-1])]}: frame size differs from "
+            f"the others ({' vs '.join(f'{s[1]}x{s[0]}' for s in sorted(shapes))})"
+        )
+    if len(scales) > 1:
+        raise DatasetError(f"{folder}: frames mix 8- and 16-bit PNGs")
+    checker = None
+    cb = [f for f in frames if f["kind"] == "checkerboard"]
+    if cb:
+        fn = os.path.join(folder, cb[0]["file"])
+        if os.path.exists(fn):
+            checker, _ = read_image(fn)
+            if checker.shape != imgs[0].shape:
+                raise DatasetError(f"{fn}: frame size differs from the rotating-star frames")
+    return Pose(
+        name=pose,
+        folder=folder,
+        rotstar=np.stack(imgs),
+        checkerboard=checker,
+        full_scale=scales.pop(),
+        files=rot_files,
+    )
+
+
+def write_pose(seq: str, pose: str, images: dict[str, np.ndarray]) -> str:
+    """Write one pose folder: {file name: uint8 or uint16 image}"""
+    folder = os.path.join(seq, pose)
+    os.makedirs(folder, exist_ok=True)
+    for name, img in images.items():
+        if img.dtype not in (np.uint8, np.uint16):
+            raise ValueError(f"{name}: write uint8 or uint16 images, not {img.dtype}")
+        if not cv2.imwrite(os.path.join(folder, name), img):
+            raise OSError(f"cannot write {os.path.join(folder, name)}")
+    return folder
