@@ -7,9 +7,9 @@ SYNOPSIS
     >>> from rotstar_mrcal import dataset
     >>> seq = tempfile.mkdtemp()
     >>> layout = make_layout(screen=(800, 600), pitch=100, band=24)
-    >>> dataset.write_pattern(seq, layout)
+    >>> _ = dataset.write_pattern(seq, layout)
     >>> frames = {f["file"]: np.zeros((40, 60), np.uint16) for f in layout.frames()}
-    >>> dataset.write_pose(seq, "pose000", frames)
+    >>> _ = dataset.write_pose(seq, "pose000", frames)
     >>> dataset.list_poses(seq)
     ['pose000']
     >>> pose = dataset.load_pose(seq, "pose000", dataset.read_pattern(seq)[1])

@@ -184,7 +184,7 @@ def choose_marker(nx: int, ny: int) -> tuple[int, int]:
     SYNOPSIS
 
         >>> choose_marker(14, 9), choose_marker(9, 9)
-        ((6, 3), (3, 2))
+        ((5, 3), (3, 2))
     """
     full = 8 if nx == ny else 4
     target = np.array(((nx - 1) / 2 - 1.0, (ny - 1) / 2 - 1.4))

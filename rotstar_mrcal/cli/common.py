@@ -1,0 +1,25 @@
+"""Helpers shared by the command-line tools: messages on stderr, progress"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+
+def say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+class Progress:
+    """'[k/n] label: message' lines on stderr, with a rate once it is slow"""
+
+    def __init__(self, n: int, quiet: bool = False):
+        self.n, self.k, self.quiet, self.t0 = n, 0, quiet, time.monotonic()
+
+    def step(self, label: str, msg: str) -> None:
+        self.k += 1
+        if not self.quiet:
+            el = time.monotonic() - self.t0
+            eta = el / self.k * (self.n - self.k)
+            tail = f"  ({el:.0f} s, ~{eta:.0f} s left)" if self.n > 3 and el > 2 else ""
+            say(f"[{self.k}/{self.n}] {label}: {msg}{tail}")

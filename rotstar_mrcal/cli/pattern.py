@@ -1,0 +1,98 @@
+"""rotstar-pattern: the display sequence (frame PNGs and pattern.json) for a screen"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+
+import cv2
+
+from ..pattern.layout import make_layout
+from ..pattern.render import encode_display, render_frame
+from .common import say
+
+DESCRIPTION = """\
+Write the rotating-star display sequence for one screen: NFRAMES frames in
+which every grid corner is the centre of a checkerboard corner turned by
+k*STEP in frame k, framed by border bands that are white in even frames and
+black in odd ones, then one plain checkerboard frame whose inner corners are
+the same screen points (the baseline). Also writes pattern.json, which
+rotstar-detect needs beside the recorded poses, and prints the mrcal object
+arguments on stderr.
+
+Show the PNGs at exactly one image pixel per display pixel (no scaling, no
+smoothing). The defaults fit an 11-inch iPad Pro (2360x1640, 264 ppi) filmed by
+a D435-class camera (1280x800, ~90 degrees) at 0.3-0.6 m.
+"""
+
+
+def _size(s: str) -> tuple[int, int]:
+    try:
+        w, h = s.lower().split("x")
+        return int(w), int(h)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{s!r}: expected WIDTHxHEIGHT, e.g. 2360x1640") from None
+
+
+def _angle(s: str) -> float:
+    t = s.strip().lower().replace(" ", "")
+    if t.startswith("pi/"):
+        return math.pi / float(t[3:])
+    return float(t)
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(prog="rotstar-pattern", description=DESCRIPTION,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", "-o", default="pattern", help="output folder (default ./pattern)")
+    p.add_argument("--screen", type=_size, default=(2360, 1640), help="screen size in display pixels (default 2360x1640)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--ppi", type=float, default=264.0, help="display pixels per inch (default 264)")
+    g.add_argument("--pixel-pitch-mm", type=float, help="display pixel pitch in millimetres (instead of --ppi)")
+    p.add_argument("--pitch", type=int, default=150, help="grid pitch: display pixels between corners, even (default 150)")
+    p.add_argument("--band", type=int, default=40,
+                   help="border-band width in display pixels, even; about 0.25-0.3 of the pitch (default 40)")
+    p.add_argument("--nx", type=int, help="corners across (default: as many as fit)")
+    p.add_argument("--ny", type=int, help="corners down (default: as many as fit)")
+    p.add_argument("--frames", type=int, default=8, help="rotating-star frames (default 8)")
+    p.add_argument("--step", type=_angle, default=math.pi / 16, help="rotation per frame, radians or pi/N (default pi/16)")
+    p.add_argument("--gamma", type=float, default=2.2,
+                   help="display gamma applied to the PNG values so that anti-aliased pixels emit the "
+                        "right amount of light (default 2.2; 1 writes linear values)")
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    a = parse_args(argv)
+    pitch_m = a.pixel_pitch_mm / 1000 if a.pixel_pitch_mm else 0.0254 / a.ppi
+    try:
+        layout = make_layout(screen=a.screen, pixel_pitch_m=pitch_m, pitch=a.pitch, band=a.band,
+                             nframes=a.frames, step=a.step, nx=a.nx, ny=a.ny)
+    except ValueError as e:
+        say(f"rotstar-pattern: {e}")
+        return 2
+    os.makedirs(a.out, exist_ok=True)
+    frames = layout.frames()
+    for k, f in enumerate(frames):
+        fn = os.path.join(a.out, f["file"])
+        if not cv2.imwrite(fn, encode_display(render_frame(layout, f), a.gamma)):
+            say(f"rotstar-pattern: {fn}: cannot write")
+            return 1
+        say(f"[{k + 1}/{len(frames)}] {fn}")
+    d = layout.to_dict()
+    d["display_gamma"] = a.gamma
+    import json
+
+    with open(os.path.join(a.out, "pattern.json"), "w") as fh:
+        json.dump(d, fh, indent=2)
+        fh.write("\n")
+    say(f"{layout.nx}x{layout.ny} corners, pitch {layout.pitch} px = {layout.spacing_m * 1000:.4f} mm, "
+        f"marker element {layout.marker}; wrote {a.out}/pattern.json")
+    say("mrcal object arguments: " + " ".join(layout.mrcal_object_args()))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,260 @@
+"""Grid indexing: which element is corner (i, j) (paper 3.2, third step)
+
+SYNOPSIS
+
+    >>> import numpy as np
+    >>> from rotstar_mrcal.detect.indexing import adjacency, grid_labels
+    >>> jj, ii = np.mgrid[0:3, 0:4]
+    >>> centres = np.stack((ii * 10.0, jj * 10.0), -1).reshape(-1, 2)
+    >>> quads = centres[:, None, :] + np.array([[-4, -4], [4, -4], [4, 4], [-4, 4]])
+    >>> A = adjacency(quads)
+    >>> labels = grid_labels(A, nx=4, ny=3)
+    >>> np.abs(labels - labels[0]).max(axis=0).tolist()
+    [3, 2]
+
+1. Each element's boundary is reduced to a quadrilateral: the vertices of its
+   minimum-area bounding rectangle, each moved to the nearest boundary point.
+2. Adjacency graph by brute force over all pairs, with the paper's rule (the
+   vertices of two elements closer than a fraction of a side), required of
+   the two closest vertex pairs that share no vertex: side neighbours face
+   each other across the band with two vertex pairs (both about one band
+   width apart, the facing sides between them), diagonal neighbours only
+   with one (the second pair is more than a side apart). The distances are
+   compared with each element's extent along the link rather than its
+   shortest side, since band and element shrink together under
+   foreshortening; and each side of an element faces at most one neighbour,
+   the best-scoring one, linked only when the choice is mutual. No single
+   threshold separates side from diagonal neighbours at steep tilts, but the
+   diagonal candidate always loses its side to the true neighbour.
+3. The boundary chain (elements with fewer than four neighbours) must be one
+   cycle with four corners (two neighbours each) whose sides have nx and ny
+   elements. Labels follow from graph distances to two adjacent corners:
+   i + j = d(corner00), (nx-1-i) + j = d(corner10). Every edge of the graph
+   must then join labels one step apart; anything else is an error, never a
+   guess.
+4. `orient` fixes the labelling among the grid's symmetries with the marker
+   element (inverted checker colours in frame 0) and the checker parity, and
+   refuses a mirror image.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import cv2
+import numpy as np
+
+
+class GridError(Exception):
+    """The elements do not form the expected grid: the board is skipped"""
+
+
+def element_quads(contours: list) -> np.ndarray:
+    """(N, 4, 2): corners of each element's minimum-area rectangle, snapped to the boundary"""
+    quads = []
+    for c in contours:
+        box = cv2.boxPoints(cv2.minAreaRect(c.astype(np.float32)))
+        d = np.linalg.norm(c[None, :, :] - box[:, None, :], axis=-1)
+        quads.append(c[np.argmin(d, axis=1)].astype(float))
+    return np.array(quads).reshape(-1, 4, 2)
+
+
+def adjacency(quads: np.ndarray, ratio: float = 1.5) -> np.ndarray:
+    """Boolean (N, N) adjacency of elements by the vertex-distance rule
+
+    For a pair of elements, the two closest vertex pairs that share no vertex
+    must join a side of each quad (adjacent vertices): the facing sides. Their
+    distance, relative to each quad's extent along the link (the two sides
+    leaving the facing side), is the pair's score. Each side of an element
+    faces at most one neighbour: the candidate with the lowest score on that
+    side, if the score is below `ratio`. Two elements are linked when each is
+    the other's choice.
+    """
+    N = len(quads)
+    Q = np.asarray(quads, float)
+    flat = np.linalg.norm(Q[:, None, :, None, :] - Q[None, :, None, :, :], axis=-1).reshape(N, N, 16)
+    k1 = np.argmin(flat, axis=-1)
+    d1 = np.take_along_axis(flat, k1[..., None], -1)[..., 0]
+    a1, b1 = k1 // 4, k1 % 4
+    va, vb = np.arange(16) // 4, np.arange(16) % 4
+    disjoint = (va != a1[..., None]) & (vb != b1[..., None])
+    k2 = np.argmin(np.where(disjoint, flat, np.inf), axis=-1)
+    d2 = np.take_along_axis(flat, k2[..., None], -1)[..., 0]
+    a2, b2 = k2 // 4, k2 % 4
+    rows = np.arange(N)[:, None]
+    cols = np.arange(N)[None, :]
+
+    def along(q, v1, v2):
+        # mean length of the two sides that leave the facing side v1-v2
+        return 0.5 * (np.linalg.norm(np.take_along_axis(q, v1[..., None, None], -2) - np.take_along_axis(q, ((2 * v1 - v2) % 4)[..., None, None], -2), axis=-1)
+                      + np.linalg.norm(np.take_along_axis(q, v2[..., None, None], -2) - np.take_along_axis(q, ((2 * v2 - v1) % 4)[..., None, None], -2), axis=-1))[..., 0]
+
+    QA = np.broadcast_to(Q[:, None], (N, N, 4, 2))
+    QB = np.broadcast_to(Q[None, :], (N, N, 4, 2))
+    extent = np.minimum(along(QA, a1, a2), along(QB, b1, b2))
+    facing = ((a1 - a2) % 2 == 1) & ((b1 - b2) % 2 == 1)
+    score = np.where(facing, np.maximum(d1, d2) / np.maximum(extent, 1e-9), np.inf)
+    np.fill_diagonal(score, np.inf)
+    # side of A used by the link: (0,1)->0, (1,2)->1, (2,3)->2, (3,0)->3
+    side = np.where(np.abs(a1 - a2) == 1, np.minimum(a1, a2), 3)
+    choice = np.zeros((N, N), bool)
+    for e in range(4):
+        s_e = np.where(side == e, score, np.inf)
+        best = np.argmin(s_e, axis=1)
+        okb = s_e[np.arange(N), best] < ratio
+        choice[np.arange(N)[okb], best[okb]] = True
+    return choice & choice.T
+
+
+def _bfs(A: np.ndarray, start: int) -> np.ndarray:
+    N = len(A)
+    dist = np.full(N, -1)
+    dist[start] = 0
+    nbrs = [np.flatnonzero(r) for r in A]
+    q = deque([start])
+    while q:
+        n = q.popleft()
+        for m in nbrs[n]:
+            if dist[m] < 0:
+                dist[m] = dist[n] + 1
+                q.append(m)
+    return dist
+
+
+def grid_labels(A: np.ndarray, nx: int, ny: int) -> np.ndarray:
+    """(N, 2) integer labels (i, j) of the elements, up to a symmetry of the grid
+
+    Raises GridError when the graph is not an nx x ny grid.
+    """
+    N = len(A)
+    if N != nx * ny:
+        raise GridError(f"found {N} elements, expected {nx}x{ny} = {nx * ny}")
+    deg = A.sum(axis=1)
+    corners = np.flatnonzero(deg == 2)
+    if len(corners) != 4 or deg.max(initial=0) > 4:
+        raise GridError(f"element adjacency has {len(corners)} corner elements (expected 4) and maximum degree {deg.max(initial=0)}")
+    # the boundary chain: one cycle through every element with fewer than 4 neighbours
+    border = deg < 4
+    expected_border = 2 * (nx + ny) - 4
+    if border.sum() != expected_border:
+        raise GridError(f"boundary chain has {border.sum()} elements, expected {expected_border}")
+    sub = A & border[:, None] & border[None, :]
+    if np.any(sub[border].sum(axis=1) != 2) or (_bfs(sub, corners[0])[border] < 0).any():
+        raise GridError("the boundary chain is not a single closed cycle")
+    d0 = _bfs(A, corners[0])
+    if (d0 < 0).any():
+        raise GridError("the elements do not form one connected grid")
+    side = {int(d0[c]) for c in corners[1:]}
+    if side != {nx - 1, ny - 1, nx + ny - 2}:
+        raise GridError(f"boundary sides do not match a {nx}x{ny} grid (corner distances {sorted(side)})")
+    cA = corners[1:][np.argmax(d0[corners[1:]] == nx - 1)]
+    dA = _bfs(A, cA)
+    i2 = d0 - dA + nx - 1
+    j2 = d0 + dA - (nx - 1)
+    if np.any(i2 % 2) or np.any(j2 % 2):
+        raise GridError("graph distances are inconsistent with a grid")
+    lab = np.stack((i2 // 2, j2 // 2), axis=-1)
+    if lab.min() < 0 or np.any(lab.max(axis=0) >= (nx, ny)):
+        raise GridError("graph distances put elements outside the grid")
+    if len({(a, b) for a, b in lab}) != N:
+        raise GridError("two elements got the same grid position")
+    e0, e1 = np.nonzero(np.triu(A))
+    if np.any(np.abs(lab[e0] - lab[e1]).sum(axis=1) != 1) or len(e0) != nx * (ny - 1) + ny * (nx - 1):
+        raise GridError("element adjacency is not that of a grid")
+    return lab
+
+
+def grid_symmetries(nx: int, ny: int) -> list[np.ndarray]:
+    """Affine maps (i, j, 1) -> (i', j') of the grid onto itself, as 2x3 integer matrices"""
+    I, J = nx - 1, ny - 1
+    g = [
+        np.array([[1, 0, 0], [0, 1, 0]]),
+        np.array([[-1, 0, I], [0, 1, 0]]),
+        np.array([[1, 0, 0], [0, -1, J]]),
+        np.array([[-1, 0, I], [0, -1, J]]),
+    ]
+    if nx == ny:
+        g += [np.array([[0, 1, 0], [1, 0, 0]]), np.array([[0, -1, J], [1, 0, 0]]),
+              np.array([[0, 1, 0], [-1, 0, I]]), np.array([[0, -1, J], [-1, 0, I]])]
+    return g
+
+
+def _grid_array(labels: np.ndarray, values: np.ndarray, nx: int, ny: int) -> np.ndarray:
+    out = np.full((ny, nx) + values.shape[1:], np.nan)
+    out[labels[:, 1], labels[:, 0]] = values
+    return out
+
+
+def axis_vectors(grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-corner image vectors to the next corner along i and along j
+
+    grid: (ny, nx, 2). One-sided differences at the edges.
+    """
+    ei = np.gradient(grid, axis=1)
+    ej = np.gradient(grid, axis=0)
+    return ei, ej
+
+
+def bilinear(img: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of img at points p (..., 2), mrcal pixel convention"""
+    H, W = img.shape
+    x = np.clip(p[..., 0], 0, W - 1.001)
+    y = np.clip(p[..., 1], 0, H - 1.001)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    return (img[y0, x0] * (1 - fx) * (1 - fy) + img[y0, x0 + 1] * fx * (1 - fy)
+            + img[y0 + 1, x0] * (1 - fx) * fy + img[y0 + 1, x0 + 1] * fx * fy)
+
+
+def checker_phase(frame0: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Signed quadrant contrast of every element in frame 0, (ny, nx)
+
+    s = I(c + a + b) + I(c - a - b) - I(c + a - b) - I(c - a + b), with
+    a, b = 0.2 x the vectors to the next corners along i and j: the checker's
+    diagonal quadrants, as frame 0's lines run along the grid axes. In the
+    true labelling s < 0 where (i + j) is even, s > 0 where odd, and the
+    opposite at the marker. Normalised by |s| of a full-contrast element.
+    """
+    ei, ej = axis_vectors(grid)
+    a, b = 0.2 * ei, 0.2 * ej
+    s = (bilinear(frame0, grid + a + b) + bilinear(frame0, grid - a - b)
+         - bilinear(frame0, grid + a - b) - bilinear(frame0, grid - a + b))
+    return s / (np.nanmedian(np.abs(s)) + 1e-12)
+
+
+def orient(labels: np.ndarray, corners: np.ndarray, frame0: np.ndarray, nx: int, ny: int,
+           marker: tuple[int, int]) -> np.ndarray:
+    """Relabel so that the marker lands on `marker`; (N, 2) labels
+
+    Tries every symmetry of the grid; the right one makes the checker phase of
+    frame 0 agree with parity everywhere and flags exactly the marker. Raises
+    GridError when no symmetry fits clearly, or when the board is seen
+    mirrored (the i and j axes turn the wrong way in the image).
+    """
+    N = len(labels)
+    j, i = np.mgrid[0:ny, 0:nx]
+    expect = np.where((i + j) % 2 == 0, -1.0, 1.0)
+    expect[marker[1], marker[0]] *= -1
+    fits, scores = [], []
+    for g in grid_symmetries(nx, ny):
+        lab = (np.column_stack((labels, np.ones(N, int))) @ g.T).astype(int)
+        grid = _grid_array(lab, corners, nx, ny)
+        s = checker_phase(frame0, grid)
+        good = (np.sign(s) == expect) & (np.abs(s) > 0.25)
+        score = float(np.mean(good))
+        scores.append(score)
+        # the marker's orbit is a full one, so only the right symmetry puts an
+        # inverted element on `marker`; the parity of the rest checks frame 0
+        if good[marker[1], marker[0]] and score >= 0.9:
+            fits.append((lab, grid))
+    if len(fits) != 1:
+        raise GridError(
+            f"orientation marker not found clearly ({len(fits)} orientations fit; best explains "
+            f"{max(scores):.0%} of the checker phases; is the first rotstar frame the one at angle 0?)"
+        )
+    lab, grid = fits[0]
+    ei, ej = axis_vectors(grid)
+    cross = ei[..., 0] * ej[..., 1] - ei[..., 1] * ej[..., 0]
+    if np.nanmedian(cross) < 0:
+        raise GridError("board seen mirrored (image flipped?): its corner order would be wrong")
+    return lab

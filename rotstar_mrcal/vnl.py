@@ -1,0 +1,84 @@
+"""mrcal's corners.vnl: writing and reading
+
+SYNOPSIS
+
+    >>> import io, numpy as np
+    >>> from rotstar_mrcal.vnl import write_corners, read_corners
+    >>> grid = np.arange(12.0).reshape(2, 3, 2); grid[1, 2] = np.nan
+    >>> out = io.StringIO()
+    >>> write_corners(out, [("seq/a/rotstar_00.png", grid), ("seq/b/rotstar_00.png", None)])
+    >>> print(out.getvalue().splitlines()[1:3], out.getvalue().splitlines()[-1])
+    ['seq/a/rotstar_00.png 0.000000 1.000000 0', 'seq/a/rotstar_00.png 2.000000 3.000000 0'] seq/b/rotstar_00.png - - -
+    >>> boards = read_corners(io.StringIO(out.getvalue()), 3, 2)
+    >>> boards["seq/a/rotstar_00.png"][1, 2].tolist(), boards["seq/b/rotstar_00.png"]
+    ([nan, nan], None)
+
+The rules (mrcal 2.5, checked against mrcal.compute_chessboard_corners): a
+header line `# filename x y level` (or `weight`), then per image either
+exactly nx*ny rows in mrcal order (row j outer, column i inner; record
+j*nx + i is board point (i, j) * spacing) or a single `filename - - -` row for
+an image without a board. A missing corner is `filename - - -`. Coordinates
+use mrcal's convention (centre of the top-left pixel = (0, 0)). Filenames must
+be ASCII without whitespace. With weights (mrcal's
+--corners-cache-has-weights) the fourth column is a weight proportional to
+1/sigma; otherwise it is the decimation level 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _check_name(fn: str) -> str:
+    if not fn.isascii() or any(c.isspace() for c in fn):
+        raise ValueError(f"{fn!r}: mrcal needs ASCII file names without whitespace")
+    return fn
+
+
+def write_corners(stream, boards, weights=None, precision: int = 6) -> None:
+    """Write [(filename, (ny, nx, 2) array or None), ...] as corners.vnl
+
+    weights: optional list parallel to boards of (ny, nx) arrays (> 0) for the
+    fourth column; NaN or <= 0 weights mark the corner missing.
+    """
+    stream.write("# filename x y " + ("weight" if weights is not None else "level") + "\n")
+    for b, (fn, grid) in enumerate(boards):
+        fn = _check_name(fn)
+        if grid is None:
+            stream.write(f"{fn} - - -\n")
+            continue
+        xy = np.asarray(grid, float).reshape(-1, 2)
+        if weights is not None:
+            wt = np.asarray(weights[b], float).ravel()
+            valid = np.isfinite(xy).all(axis=1) & np.isfinite(wt) & (wt > 0)
+            fourth = [f"{v:.6g}" for v in np.where(valid, wt, 0)]
+        else:
+            valid = np.isfinite(xy).all(axis=1)
+            fourth = ["0"] * len(xy)
+        for (x, y), ok, f4 in zip(xy, valid, fourth):
+            stream.write(f"{fn} {x:.{precision}f} {y:.{precision}f} {f4}\n" if ok else f"{fn} - - -\n")
+
+
+def read_corners(stream, nx: int, ny: int) -> dict:
+    """{filename: (ny, nx, 2) array with NaN for missing, or None for no board}"""
+    rows: dict[str, list] = {}
+    order: list[str] = []
+    for line in stream:
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        f = line.split()
+        if f[0] not in rows:
+            rows[f[0]] = []
+            order.append(f[0])
+        rows[f[0]].append([np.nan, np.nan] if f[1] == "-" else [float(f[1]), float(f[2])])
+    out = {}
+    for fn in order:
+        r = rows[fn]
+        if len(r) == 1 and np.isnan(r[0][0]):
+            out[fn] = None
+        elif len(r) == nx * ny:
+            out[fn] = np.array(r).reshape(ny, nx, 2)
+        else:
+            raise ValueError(f"{fn}: {len(r)} rows, expected {nx * ny} or 1")
+    return out
