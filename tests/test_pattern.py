@@ -1,0 +1,135 @@
+"""The display sequence: layout contract and exact rendering"""
+
+import json
+import math
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from rotstar_mrcal.pattern.layout import choose_marker, layout_from_dict, make_layout, marker_orbit
+from rotstar_mrcal.pattern.render import checker_coverage, decode_display, encode_display, render_frame
+
+
+@pytest.fixture(scope="module")
+def small():
+    return make_layout(screen=(800, 600), pitch=100, band=24)
+
+
+def supersampled_checker(dx, dy, theta, n=128):
+    t = (np.arange(n) + 0.5) / n - 0.5
+    sy, sx = np.meshgrid(t, t, indexing="ij")
+    px, py = dx[..., None, None] + sx, dy[..., None, None] + sy
+    c, s = math.cos(theta), math.sin(theta)
+    prod = (c * px + s * py) * (-s * px + c * py)
+    return np.mean(np.where(np.abs(prod) < 1e-9, 0.5, prod < 0), axis=(-1, -2))  # samples on a line count half
+
+
+@pytest.mark.parametrize("k", range(8))
+def test_checker_coverage_is_area_fraction(k):
+    dy, dx = np.mgrid[-12:12, -12:12] + 0.5
+    theta = k * math.pi / 16
+    exact = checker_coverage(dx, dy, theta)
+    # 128x128 supersampling is itself accurate to ~1/128 of an edge pixel
+    assert np.abs(exact - supersampled_checker(dx, dy, theta)).max() < 2e-3
+
+
+def test_frame0_is_pixel_aligned(small):
+    x0, y0, x1, y1 = small.board_extent()
+    board = render_frame(small, small.frames()[0])[y0:y1, x0:x1]
+    # corners, element edges and bands lie on pixel boundaries: no pixel is split
+    assert set(np.unique(board)) == {0.0, 1.0}
+    # a rotated frame has anti-aliased pixels along its lines
+    rotated = render_frame(small, small.frames()[1])[y0:y1, x0:x1]
+    assert ((rotated > 0) & (rotated < 1)).sum() > 4 * small.nx * small.ny * small.half_element
+
+
+def test_corners_on_pixel_boundaries_and_point_symmetric(small):
+    for f in small.frames()[: small.nframes]:
+        img = render_frame(small, f)
+        for (x, y) in small.corner_screen_xy().reshape(-1, 2).astype(int):
+            h = small.half_element
+            patch = img[y - h : y + h, x - h : x + h]
+            # point symmetry about the corner (x, y): pixel (x+a, y+b) <-> (x-1-a, y-1-b)
+            assert np.allclose(patch, patch[::-1, ::-1], atol=1e-9)
+
+
+def test_bands_alternate_and_checkerboard_matches_frame0(small):
+    f = small.frames()
+    x0, y0, x1, y1 = small.board_extent()
+    for k in range(small.nframes):
+        img = render_frame(small, f[k])
+        assert img[y0 + 2, x0 + 2] == (1.0 if k % 2 == 0 else 0.0)
+    rs0, cb = render_frame(small, f[0]), render_frame(small, f[-1])
+    assert f[-1]["kind"] == "checkerboard"
+    # away from the marker, frame 0's quadrants have the checkerboard's colours
+    for (i, j), (x, y) in zip(np.ndindex(small.ny, small.nx), small.corner_screen_xy().reshape(-1, 2).astype(int)):
+        i, j = j, i
+        d = small.half_element // 2
+        same = rs0[y + d, x + d] == cb[y + d, x + d]
+        assert same == ((i, j) != small.marker)
+
+
+def test_default_layout_fits_ipad_and_d435():
+    L = make_layout()
+    assert (L.screen_width, L.screen_height) == (2360, 1640)
+    assert 110 <= L.nx * L.ny <= 150
+    x0, y0, x1, y1 = L.checkerboard_extent()
+    assert x0 >= 0 and y0 >= 0 and x1 <= 2360 and y1 <= 1640
+    assert L.spacing_m == pytest.approx(150 * 0.0254 / 264)
+
+
+@pytest.mark.parametrize("nx,ny", [(14, 9), (9, 9), (6, 4), (11, 8), (3, 3)])
+def test_marker_orbit_is_full(nx, ny):
+    m = choose_marker(nx, ny) if (nx, ny) != (3, 3) else None
+    if m is None:
+        with pytest.raises(ValueError):
+            choose_marker(nx, ny)
+        return
+    assert len(marker_orbit(m, nx, ny)) == (8 if nx == ny else 4)
+    assert 0 < m[0] < nx - 1 and 0 < m[1] < ny - 1
+
+
+def test_pattern_json_contract_roundtrip(small):
+    d = json.loads(small.to_json())
+    assert d["screen"] == {"width": 800, "height": 600, "pixel_pitch_m": small.pixel_pitch_m}
+    assert d["grid"]["nx"] == small.nx and d["grid"]["origin"] == list(small.origin)
+    kinds = [f["kind"] for f in d["frames"]]
+    assert kinds == ["rotstar"] * 8 + ["checkerboard"]
+    assert [f["band"] for f in d["frames"][:3]] == ["white", "black", "white"]
+    assert d["frames"][3]["angle_rad"] == pytest.approx(3 * math.pi / 16)
+    assert layout_from_dict(d) == small
+    bp = small.board_points()
+    assert bp[0, 1].tolist() == pytest.approx([small.spacing_m, 0, 0])
+    assert bp[1, 0].tolist() == pytest.approx([0, small.spacing_m, 0])
+
+
+def test_layout_rejects_odd_or_oversized():
+    with pytest.raises(ValueError, match="even"):
+        make_layout(pitch=151)
+    with pytest.raises(ValueError, match="fit"):
+        make_layout(screen=(800, 600), pitch=100, band=24, nx=20)
+
+
+def test_gamma_roundtrip():
+    v = np.linspace(0, 1, 11)
+    assert np.allclose(decode_display(encode_display(v)), v, atol=0.01)
+    assert encode_display(np.array([0.5]))[0] == round(255 * 0.5 ** (1 / 2.2))
+
+
+def test_cli_writes_sequence(tmp_path):
+    out = tmp_path / "pat"
+    r = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(out),
+                        "--screen", "800x600", "--pitch", "100", "--band", "24"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "--object-spacing" in r.stderr and "--object-width-n 6" in r.stderr and "--object-height-n 4" in r.stderr
+    d = json.loads((out / "pattern.json").read_text())
+    for f in d["frames"]:
+        img = cv2.imread(str(out / f["file"]), cv2.IMREAD_UNCHANGED)
+        assert img.shape == (600, 800) and img.dtype == np.uint8
+    bad = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(out), "--pitch", "99"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "even" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
