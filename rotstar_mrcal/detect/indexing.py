@@ -5,27 +5,27 @@ SYNOPSIS
     >>> import numpy as np
     >>> from rotstar_mrcal.detect.indexing import adjacency, grid_labels
     >>> jj, ii = np.mgrid[0:3, 0:4]
-    >>> centres = np.stack((ii * 10.0, jj * 10.0), -1).reshape(-1, 2)
-    >>> quads = centres[:, None, :] + np.array([[-4, -4], [4, -4], [4, 4], [-4, 4]])
-    >>> A = adjacency(quads)
+    >>> centres = np.stack((ii * 20 + 20, jj * 20 + 20), -1).reshape(-1, 2)
+    >>> contours = list(centres[:, None, :] + np.array([[-7, -7], [7, -7], [7, 7], [-7, 7]]))
+    >>> A = adjacency(contours, (100, 120))
     >>> labels = grid_labels(A, nx=4, ny=3)
     >>> np.abs(labels - labels[0]).max(axis=0).tolist()
     [3, 2]
 
-1. Each element's boundary is reduced to a quadrilateral: the vertices of its
-   minimum-area bounding rectangle, each moved to the nearest boundary point.
-2. Adjacency graph by brute force over all pairs, with the paper's rule (the
-   vertices of two elements closer than a fraction of a side), required of
-   the two closest vertex pairs that share no vertex: side neighbours face
-   each other across the band with two vertex pairs (both about one band
-   width apart, the facing sides between them), diagonal neighbours only
-   with one (the second pair is more than a side apart). The distances are
-   compared with each element's extent along the link rather than its
-   shortest side, since band and element shrink together under
-   foreshortening; and each side of an element faces at most one neighbour,
-   the best-scoring one, linked only when the choice is mutual. No single
-   threshold separates side from diagonal neighbours at steep tilts, but the
-   diagonal candidate always loses its side to the true neighbour.
+1. (For the paper's outline-based rule, adjacency_quads, each element's
+   boundary is reduced to a quadrilateral: the vertices of its minimum-area
+   bounding rectangle, each moved to the nearest boundary point.)
+2. Adjacency graph by brute force over all pairs, in the spirit of the
+   paper's rule (elements whose bounding-rectangle vertices are closer than
+   a fraction of a side are neighbours), made robust: the paper's vertex
+   distance separates side from diagonal neighbours by only sqrt(2), which
+   blur (it widens the thresholded bands) and foreshortening undo. Instead,
+   side neighbours face each other across one band with a whole side, so
+   the midpoints of their facing sides are a band apart (0.4 of an element)
+   while a diagonal neighbour is 1.4 elements away; distances are measured
+   in units of each element's extent along the link, which shrinks with the
+   band under foreshortening. Each side of an element faces at most one
+   neighbour, the best-scoring one, linked only when the choice is mutual.
 3. The boundary chain (elements with fewer than four neighbours) must be one
    cycle with four corners (two neighbours each) whose sides have nx and ny
    elements. Labels follow from graph distances to two adjacent corners:
@@ -59,51 +59,102 @@ def element_quads(contours: list) -> np.ndarray:
     return np.array(quads).reshape(-1, 4, 2)
 
 
-def adjacency(quads: np.ndarray, ratio: float = 1.5) -> np.ndarray:
-    """Boolean (N, N) adjacency of elements by the vertex-distance rule
+def adjacency_quads(quads: np.ndarray, ratio: float = 1.0) -> np.ndarray:
+    """Boolean (N, N) adjacency of elements from their quadrilaterals
 
-    For a pair of elements, the two closest vertex pairs that share no vertex
-    must join a side of each quad (adjacent vertices): the facing sides. Their
-    distance, relative to each quad's extent along the link (the two sides
-    leaving the facing side), is the pair's score. Each side of an element
-    faces at most one neighbour: the candidate with the lowest score on that
-    side, if the score is below `ratio`. Two elements are linked when each is
-    the other's choice.
+    For every pair of elements, the closest pair of side midpoints (one side
+    of each) are the facing sides; their distance relative to each quad's
+    extent along the link (the mean of the two sides that leave the facing
+    side) is the pair's score: about band/element = 0.4 for side neighbours,
+    1.4 or more for diagonal ones, 1.8 for the next element but one, whatever
+    the foreshortening. Each side of an element faces at most one neighbour,
+    the candidate with the lowest score below `ratio`; two elements are linked
+    when each is the other's choice.
     """
     N = len(quads)
     Q = np.asarray(quads, float)
-    flat = np.linalg.norm(Q[:, None, :, None, :] - Q[None, :, None, :, :], axis=-1).reshape(N, N, 16)
-    k1 = np.argmin(flat, axis=-1)
-    d1 = np.take_along_axis(flat, k1[..., None], -1)[..., 0]
-    a1, b1 = k1 // 4, k1 % 4
-    va, vb = np.arange(16) // 4, np.arange(16) % 4
-    disjoint = (va != a1[..., None]) & (vb != b1[..., None])
-    k2 = np.argmin(np.where(disjoint, flat, np.inf), axis=-1)
-    d2 = np.take_along_axis(flat, k2[..., None], -1)[..., 0]
-    a2, b2 = k2 // 4, k2 % 4
-    rows = np.arange(N)[:, None]
-    cols = np.arange(N)[None, :]
-
-    def along(q, v1, v2):
-        # mean length of the two sides that leave the facing side v1-v2
-        return 0.5 * (np.linalg.norm(np.take_along_axis(q, v1[..., None, None], -2) - np.take_along_axis(q, ((2 * v1 - v2) % 4)[..., None, None], -2), axis=-1)
-                      + np.linalg.norm(np.take_along_axis(q, v2[..., None, None], -2) - np.take_along_axis(q, ((2 * v2 - v1) % 4)[..., None, None], -2), axis=-1))[..., 0]
-
-    QA = np.broadcast_to(Q[:, None], (N, N, 4, 2))
-    QB = np.broadcast_to(Q[None, :], (N, N, 4, 2))
-    extent = np.minimum(along(QA, a1, a2), along(QB, b1, b2))
-    facing = ((a1 - a2) % 2 == 1) & ((b1 - b2) % 2 == 1)
-    score = np.where(facing, np.maximum(d1, d2) / np.maximum(extent, 1e-9), np.inf)
+    nxt = np.roll(Q, -1, axis=1)
+    mid = 0.5 * (Q + nxt)  # (N, 4, 2): side e joins vertices e and e+1
+    length = np.linalg.norm(nxt - Q, axis=-1)  # (N, 4)
+    along = 0.5 * (np.roll(length, 1, axis=1) + np.roll(length, -1, axis=1))  # sides e-1 and e+1
+    d = np.linalg.norm(mid[:, None, :, None, :] - mid[None, :, None, :, :], axis=-1).reshape(N, N, 16)
+    k = np.argmin(d, axis=-1)
+    e, f = k // 4, k % 4
+    dmin = np.take_along_axis(d, k[..., None], -1)[..., 0]
+    extent = np.minimum(np.take_along_axis(along[:, None, :], e[..., None], -1)[..., 0],
+                        np.take_along_axis(along[None, :, :], f[..., None], -1)[..., 0])
+    score = dmin / np.maximum(extent, 1e-9)
     np.fill_diagonal(score, np.inf)
-    # side of A used by the link: (0,1)->0, (1,2)->1, (2,3)->2, (3,0)->3
-    side = np.where(np.abs(a1 - a2) == 1, np.minimum(a1, a2), 3)
     choice = np.zeros((N, N), bool)
-    for e in range(4):
-        s_e = np.where(side == e, score, np.inf)
+    rows = np.arange(N)
+    for side in range(4):
+        s_e = np.where(e == side, score, np.inf)
         best = np.argmin(s_e, axis=1)
-        okb = s_e[np.arange(N), best] < ratio
-        choice[np.arange(N)[okb], best[okb]] = True
+        ok = s_e[rows, best] < ratio
+        choice[rows[ok], best[ok]] = True
     return choice & choice.T
+
+
+def adjacency(contours: list, shape: tuple[int, int], min_contact: float = 0.45) -> np.ndarray:
+    """Boolean (N, N) adjacency of elements by shared border in the band lattice
+
+    Every pixel between the elements is given to the nearest element (a
+    Voronoi partition of the border lattice). Side neighbours share a
+    boundary along the band segment between them, about a side of an
+    element long; diagonal neighbours touch only where the bands cross, so
+    boundary pixels with a third element about as near (within 25%) are not
+    counted. Each element keeps its (up to) four longest boundaries that are
+    longer than `min_contact` times the smaller element's mean side (the
+    square root of its area; foreshortening can make the contact across the
+    short direction about half of that), and two elements are linked when
+    each keeps the other. Unlike rules on the elements' outlines (such as the
+    paper's vertex distance, see adjacency_quads) this holds under shear,
+    steep perspective and blur.
+    """
+    import scipy.ndimage as ndi
+    from scipy.spatial import cKDTree
+
+    N = len(contours)
+    if N == 0:
+        return np.zeros((0, 0), bool)
+    allpts = np.concatenate(contours)
+    owner = np.repeat(np.arange(N), [len(c) for c in contours])
+    pad = 4
+    x0, y0 = np.maximum(allpts.min(axis=0) - pad, 0)
+    x1, y1 = np.minimum(allpts.max(axis=0) + pad + 1, (shape[1], shape[0]))
+    lab = np.zeros((y1 - y0, x1 - x0), np.int32)
+    for k, c in enumerate(contours):
+        cv2.drawContours(lab, [(c - (x0, y0)).astype(np.int32)[:, None, :]], 0, k + 1, thickness=-1)
+    dist, (iy, ix) = ndi.distance_transform_edt(lab == 0, return_indices=True)
+    vor = lab[iy, ix]
+    area = np.array([max(cv2.contourArea(c.astype(np.float32)), 1.0) for c in contours])
+    side = np.sqrt(area)
+    vor[dist > 0.75 * np.median(side)] = 0  # stay inside the board
+    # boundary pixels between two different elements (horizontal and vertical pairs)
+    ya, xa = np.nonzero((vor[:, :-1] != vor[:, 1:]) & (vor[:, :-1] > 0) & (vor[:, 1:] > 0))
+    yb, xb = np.nonzero((vor[:-1, :] != vor[1:, :]) & (vor[:-1, :] > 0) & (vor[1:, :] > 0))
+    a = np.concatenate((vor[ya, xa], vor[yb, xb])) - 1
+    b = np.concatenate((vor[ya, xa + 1], vor[yb + 1, xb])) - 1
+    p = np.concatenate((np.column_stack((xa + 0.5, ya)), np.column_stack((xb, yb + 0.5)))) + (x0, y0)
+    if len(p):
+        kk = min(48, len(allpts))
+        dd, ii = cKDTree(allpts).query(p, k=kk)
+        dd, ii = dd.reshape(len(p), kk), ii.reshape(len(p), kk)
+        own = owner[ii]
+        d_ab = np.where((own == a[:, None]) | (own == b[:, None]), dd, np.inf).min(axis=1)
+        d_3 = np.where((own != a[:, None]) & (own != b[:, None]), dd, np.inf).min(axis=1)
+        keep = d_3 > 1.25 * d_ab
+        a, b = a[keep], b[keep]
+    contact = np.zeros((N, N))
+    np.add.at(contact, (a, b), 1)
+    contact = contact + contact.T
+    np.fill_diagonal(contact, 0)
+    strong = contact > np.maximum(2.0, min_contact * np.minimum(side[:, None], side[None, :]))
+    top4 = np.zeros_like(strong)
+    order = np.argsort(-contact, axis=1)[:, :4]
+    top4[np.arange(N)[:, None], order] = True
+    keep = strong & top4
+    return keep & keep.T
 
 
 def _bfs(A: np.ndarray, start: int) -> np.ndarray:

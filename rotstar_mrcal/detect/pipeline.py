@@ -31,7 +31,7 @@ import numpy as np
 
 from ..pattern.layout import Layout
 from .boundaries import element_boundaries
-from .indexing import GridError, adjacency, element_quads, grid_labels, orient
+from .indexing import GridError, adjacency, grid_labels, orient
 from .refine import symmetric_refine
 from .response import binarize, response_map
 from .rough import rough_corners
@@ -121,7 +121,7 @@ def detect_pose(
     rough, rough_ok = rough_corners(frames, el.contours, el.centroids)
     rough = np.where(rough_ok[:, None], rough, el.centroids)
     try:
-        labels = grid_labels(adjacency(element_quads(el.contours)), layout.nx, layout.ny)
+        labels = grid_labels(adjacency(el.contours, frames.shape[1:]), layout.nx, layout.ny)
         labels = orient(labels, rough, frames[0], layout.nx, layout.ny, layout.marker)
     except GridError as e:
         return _fail(layout, str(e))
