@@ -137,7 +137,7 @@ def adjacency(contours: list, shape: tuple[int, int], min_contact: float = 0.45)
     b = np.concatenate((vor[ya, xa + 1], vor[yb + 1, xb])) - 1
     p = np.concatenate((np.column_stack((xa + 0.5, ya)), np.column_stack((xb, yb + 0.5)))) + (x0, y0)
     if len(p):
-        kk = min(48, len(allpts))
+        kk = min(24, len(allpts))
         dd, ii = cKDTree(allpts).query(p, k=kk)
         dd, ii = dd.reshape(len(p), kk), ii.reshape(len(p), kk)
         own = owner[ii]

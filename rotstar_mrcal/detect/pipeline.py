@@ -17,6 +17,14 @@ function in its own module; this one strings them together and turns their
 failures into a reason. A board whose labelling is not certain is never
 returned: it is skipped with the reason.
 
+Where the refinement starts: the paper's rough corner (the point nearest to
+the fitted checker lines of all frames) for elements whose inscribed square
+has a half-size of LARGE_ELEMENT px or more, where perspective biases the
+element's centroid; the centroid of the element boundary for smaller ones,
+where it is the better start (measured on simulated D435 views with 10-14 px
+elements: centroid 0.1 px median error, curve intersection 0.3 px, both well
+inside the refinement's reach and giving identical refined corners).
+
 The refinement window is capped per corner at 0.65 x the half-side of the
 largest square inside the element's boundary, so that the symmetric window
 never reaches the border band or the neighbouring elements (whose crossings
@@ -37,6 +45,7 @@ from .response import binarize, response_map
 from .rough import rough_corners
 
 REFINERS = ("symmetric", "opencv", "saddle")
+LARGE_ELEMENT = 12.0  # px, inscribed half-size above which the curve intersection starts the refinement
 WINDOW_FRACTION = 0.65
 MIN_WINDOW = 2.0
 
@@ -76,16 +85,19 @@ def check_exposure(frames: np.ndarray, full_scale: float) -> str:
     return ""
 
 
-def frame_motion(frames: np.ndarray, corners: np.ndarray, window: np.ndarray, ok: np.ndarray) -> float:
+def frame_motion(frames: np.ndarray, corners: np.ndarray, window: np.ndarray, ok: np.ndarray,
+                 n_corners: int = 24) -> float:
     """Median over corners of the largest per-frame corner shift, px
 
     Each frame alone is point-symmetric about the same corner when the camera
-    held still: refine each frame separately from the joint solution and
-    measure how far the per-frame answers spread.
+    held still: refine each frame separately from the joint solution (for
+    n_corners spread over the board) and measure how far the per-frame
+    answers spread.
     """
     idx = np.flatnonzero(ok)
     if len(idx) < 3:
         return 0.0
+    idx = idx[np.linspace(0, len(idx) - 1, min(n_corners, len(idx))).astype(int)]
     per = np.stack([symmetric_refine(f[None], corners[idx], window[idx], max_iter=15, tol=1e-3).corners
                     for f in frames])  # (nf, n, 2)
     spread = np.nanmax(np.linalg.norm(per - np.nanmedian(per, axis=0), axis=-1), axis=0)
@@ -118,10 +130,22 @@ def detect_pose(
     if len(el.contours) != n_expected:
         hint = " (camera moved during the sequence? wrong pattern.json?)" if len(el.contours) else " (no rotating-star pattern found)"
         return _fail(layout, f"found {len(el.contours)} elements, expected {layout.nx}x{layout.ny} = {n_expected}{hint}")
-    rough, rough_ok = rough_corners(frames, el.contours, el.centroids)
-    rough = np.where(rough_ok[:, None], rough, el.centroids)
+    # work on the board's bounding box from here on (all stages are local)
+    H, W = frames.shape[1:]
+    m = int(np.ceil(window)) + 4
+    x0, y0 = np.maximum(el.lattice.min(axis=0) - m, 0)
+    x1, y1 = np.minimum(el.lattice.max(axis=0) + m + 1, (W, H))
+    off = np.array([x0, y0], float)
+    frames = frames[:, y0:y1, x0:x1]
+    contours = [c - (x0, y0) for c in el.contours]
+    centroids = el.centroids - off
+    rough = centroids.copy()
+    large = el.inscribed >= LARGE_ELEMENT
+    if large.any():
+        q, ok = rough_corners(frames, [c for c, l in zip(contours, large) if l], centroids[large])
+        rough[np.flatnonzero(large)[ok]] = q[ok]
     try:
-        labels = grid_labels(adjacency(el.contours, frames.shape[1:]), layout.nx, layout.ny)
+        labels = grid_labels(adjacency(contours, frames.shape[1:]), layout.nx, layout.ny)
         labels = orient(labels, rough, frames[0], layout.nx, layout.ny, layout.marker)
     except GridError as e:
         return _fail(layout, str(e))
@@ -162,5 +186,5 @@ def detect_pose(
         raise ValueError(f"unknown refiner {refine!r}; choose one of {REFINERS}")
 
     corners = np.full((layout.ny, layout.nx, 2), np.nan)
-    corners[labels[:, 1], labels[:, 0]] = q
+    corners[labels[:, 1], labels[:, 0]] = q + off
     return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion)

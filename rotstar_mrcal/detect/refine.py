@@ -115,7 +115,11 @@ def symmetric_refine(
     tol: float = 1e-3,
     seed: int = 0,
 ) -> Refined:
-    """Refine corners (N, 2) on frames (nframes, H, W) by Eq. 1; see the module doc"""
+    """Refine corners (N, 2) on frames (nframes, H, W) by Eq. 1; see the module doc
+
+    Corners are processed in groups of equal ceil(window), each corner with
+    density * (2 ceil(w) + 1)^2 samples.
+    """
     frames = np.asarray(frames, np.float32)
     if frames.ndim == 2:
         frames = frames[None]
@@ -123,7 +127,20 @@ def symmetric_refine(
     N = len(q0)
     w = np.broadcast_to(np.asarray(window, float), (N,)).copy()
     sampler = _Sampler(frames)
-    u = unit_offsets(max(float(w.max(initial=1)), 1), seed, density)
+    out = Refined(np.full((N, 2), np.nan), np.zeros(N, bool), np.full(N, "", dtype=object),
+                  np.full(N, np.nan), np.full((N, 2, 2), np.nan), 0)
+    wc = np.ceil(np.maximum(w, 1)).astype(int)
+    for g in np.unique(wc):
+        sel = np.flatnonzero(wc == g)
+        r = _refine_group(sampler, frames.shape[0], q0[sel], w[sel], unit_offsets(g, seed, density), max_iter, tol)
+        out.corners[sel], out.ok[sel], out.reason[sel] = r.corners, r.ok, r.reason
+        out.sigma[sel], out.cov[sel] = r.sigma, r.cov
+        out.iterations = max(out.iterations, r.iterations)
+    return out
+
+
+def _refine_group(sampler, nframes, q0, w, u, max_iter, tol) -> Refined:
+    N = len(q0)
     D = (w[:, None, None] * u[None]).astype(np.float64)  # (N, S, 2)
 
     q = q0.copy()
@@ -171,7 +188,7 @@ def symmetric_refine(
     reason[nc] = "did not converge"
     ok &= ~nc
 
-    M = D.shape[1] * frames.shape[0]
+    M = D.shape[1] * nframes
     sigma2 = cost / max(M - 2, 1)
     cov = np.full((N, 2, 2), np.nan)
     good = ok & np.isfinite(cost)

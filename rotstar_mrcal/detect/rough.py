@@ -27,8 +27,8 @@ import numpy as np
 
 from .boundaries import inscribed_square
 
-MAX_POINTS = 96
-RANSAC_HYPOTHESES = 24
+MAX_POINTS = 64
+RANSAC_HYPOTHESES = 16
 INLIER_PX = 1.5
 
 
@@ -63,13 +63,15 @@ def _edge_points(grad: np.ndarray, centres: np.ndarray, halfsides: np.ndarray, r
     M = min(MAX_POINTS, key.shape[1])
     sel = np.argpartition(-key, M - 1, axis=1)[:, :M]
     valid = np.take_along_axis(cand, sel, axis=1)
+    mag = np.take_along_axis(patch, sel, axis=1)
     P = 2 * R + 1
     xs = np.broadcast_to(X, (E, P, P)).reshape(E, 1, -1).repeat(nf, 1).reshape(E * nf, -1)
     ys = np.broadcast_to(Y, (E, P, P)).reshape(E, 1, -1).repeat(nf, 1).reshape(E * nf, -1)
     pts = np.stack((np.take_along_axis(xs, sel, 1), np.take_along_axis(ys, sel, 1)), axis=-1).astype(float)
     # valid points first, so that RANSAC can sample the first n entries
     order = np.argsort(~valid, axis=1, kind="stable")
-    return np.take_along_axis(pts, order[..., None], 1), np.take_along_axis(valid, order, 1)
+    return (np.take_along_axis(pts, order[..., None], 1), np.take_along_axis(valid, order, 1),
+            np.take_along_axis(mag, order, 1))
 
 
 def _ransac_lines(pts, valid, rng):
@@ -92,7 +94,7 @@ def _ransac_lines(pts, valid, rng):
     return inliers
 
 
-def _fit_quadratic(pts, w):
+def _fit_quadratic(pts, w, min_span: float = 12.0):
     """Weighted quadratic curve per batch in a frame aligned with its principal axis
 
     Returns (centre (B,2), direction (B,2), coefficients (B,3) of
@@ -109,7 +111,9 @@ def _fit_quadratic(pts, w):
     normal = np.stack((-direction[:, 1], direction[:, 0]), axis=-1)
     u = (x * direction[:, None, :]).sum(-1)
     v = (x * normal[:, None, :]).sum(-1)
-    A = np.stack((np.ones_like(u), u, u * u), axis=-1)
+    # curvature only where the points span enough of the line to show it
+    span = np.sqrt(np.maximum(evals[:, 1], 0)) * 3.46  # ~ length of a uniform segment
+    A = np.stack((np.ones_like(u), u, u * u * (span[:, None] >= min_span)), axis=-1)
     Aw = A.transpose(0, 2, 1) * w[:, None, :]
     AtA = Aw @ A + 1e-9 * np.eye(3)
     Atv = (Aw @ v[..., None])[..., 0]
@@ -139,12 +143,13 @@ def rough_corners(frames: np.ndarray, contours: list, centroids: np.ndarray, see
     nf = len(f)
     grad = np.stack([cv2.magnitude(cv2.Sobel(k, cv2.CV_32F, 1, 0), cv2.Sobel(k, cv2.CV_32F, 0, 1)) for k in f])
     half = np.array([inscribed_square(c, m) for c, m in zip(contours, centroids)]) * 0.85 - 1.0
-    pts, valid = _edge_points(grad, centroids, half, rng)
+    pts, valid, mag = _edge_points(grad, centroids, half, rng)
     E = len(centroids)
     in1 = _ransac_lines(pts, valid, rng)
     rest = valid & ~in1
     in2 = _ransac_lines(pts, rest, rng)
-    w = np.concatenate((in1, in2)).astype(float)
+    # weights: the gradient magnitude, so that a thick edge band fits at its middle
+    w = np.concatenate((in1, in2)) * np.concatenate((mag, mag))
     P = np.concatenate((pts, pts))
     m, d, coef, okc = _fit_quadratic(P, w)
     # refit each curve on the points within INLIER_PX of it (a RANSAC-style consensus step)
