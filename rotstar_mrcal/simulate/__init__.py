@@ -1,0 +1,46 @@
+"""Simulator of "the screen seen by a camera": ground truth for tests and benchmarks
+
+SYNOPSIS
+
+    >>> import numpy as np
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> from rotstar_mrcal import simulate
+    >>> layout = make_layout(screen=(800, 600), pitch=100, band=24)
+    >>> model = simulate.preset_model("pinhole-small")
+    >>> screen = simulate.make_screen(simulate.exact_frames(layout), layout)
+    >>> rt = simulate.random_poses(model, layout, 1, np.random.default_rng(0))[0]
+    >>> E = simulate.render_irradiance(screen, model, rt, supersample=4, psf=1.0)
+    >>> img = simulate.expose(E, gain=0.9, noise=0.01, bits=16, rng=0)
+    >>> img.shape, img.dtype
+    ((9, 400, 640), dtype('uint16'))
+
+Modules, one concept each:
+
+    camera    camera presets; the cached per-pixel rays of a camera model
+    screen    the screen as a light source (frames -> summed-area tables)
+    render    rays -> board plane -> screen, area-sampled sub-pixels, PSF, blocks
+    optics    point-spread functions on the supersampled image
+    exposure  gain, black level, noise, saturation, 8/16-bit quantisation
+    poses     random calibration poses that keep the board inside the image
+    dataset   write a dataset + truth.json/truth.cameramodel; load the truth
+
+See doc/simulator.md.
+"""
+
+from .camera import PRESETS, RayGrid, camera_rays, preset_model
+from .dataset import Settings, Truth, load_truth, pose_names, render_pose, true_corners, write_dataset
+from .exposure import expose, full_scale_code
+from .optics import GaussianPSF, KernelPSF, TiledPSF, as_psf, gaussian_kernel
+from .poses import default_distance_range, look_at_pose, pose_ok, random_poses, tilt_angle
+from .render import render_irradiance
+from .screen import Screen, exact_frames, make_screen, png_frames
+
+__all__ = [
+    "PRESETS", "RayGrid", "camera_rays", "preset_model",
+    "Settings", "Truth", "load_truth", "pose_names", "render_pose", "true_corners", "write_dataset",
+    "expose", "full_scale_code",
+    "GaussianPSF", "KernelPSF", "TiledPSF", "as_psf", "gaussian_kernel",
+    "default_distance_range", "look_at_pose", "pose_ok", "random_poses", "tilt_angle",
+    "render_irradiance",
+    "Screen", "exact_frames", "make_screen", "png_frames",
+]
