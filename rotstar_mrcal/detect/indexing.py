@@ -95,7 +95,8 @@ def adjacency_quads(quads: np.ndarray, ratio: float = 1.0) -> np.ndarray:
     return choice & choice.T
 
 
-def adjacency(contours: list, shape: tuple[int, int], min_contact: float = 0.45) -> np.ndarray:
+def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None = None,
+              min_contact: float = 0.45) -> np.ndarray:
     """Boolean (N, N) adjacency of elements by shared border in the band lattice
 
     Every pixel between the elements is given to the nearest element (a
@@ -103,11 +104,15 @@ def adjacency(contours: list, shape: tuple[int, int], min_contact: float = 0.45)
     boundary along the band segment between them, about a side of an
     element long; diagonal neighbours touch only where the bands cross, so
     boundary pixels with a third element about as near (within 25%) are not
-    counted. Each element keeps its (up to) four longest boundaries that are
+    counted; nor are pixels outside `lattice` (the outer contour of the border
+    lattice), where the corner elements' neighbours would meet around them. Each element keeps its (up to) four longest boundaries that are
     longer than `min_contact` times the smaller element's mean side (the
     square root of its area; foreshortening can make the contact across the
     short direction about half of that), and two elements are linked when
-    each keeps the other. Unlike rules on the elements' outlines (such as the
+    each keeps the other. A grid has no triangles, so of any three mutually
+    linked elements the weakest link is dropped (strong shear can give the
+    two elements beside a border corner a real shared boundary across the
+    crossing). Unlike rules on the elements' outlines (such as the
     paper's vertex distance, see adjacency_quads) this holds under shear,
     steep perspective and blur.
     """
@@ -129,7 +134,11 @@ def adjacency(contours: list, shape: tuple[int, int], min_contact: float = 0.45)
     vor = lab[iy, ix]
     area = np.array([max(cv2.contourArea(c.astype(np.float32)), 1.0) for c in contours])
     side = np.sqrt(area)
-    vor[dist > 0.75 * np.median(side)] = 0  # stay inside the board
+    vor[dist > 0.75 * np.median(side)] = 0  # stay near the elements
+    if lattice is not None:  # and inside the border lattice: no contact around the board's corners
+        inside = np.zeros_like(lab, np.uint8)
+        cv2.fillPoly(inside, [(np.asarray(lattice) - (x0, y0)).astype(np.int32)[:, None, :]], 1)
+        vor[inside == 0] = 0
     # boundary pixels between two different elements (horizontal and vertical pairs)
     ya, xa = np.nonzero((vor[:, :-1] != vor[:, 1:]) & (vor[:, :-1] > 0) & (vor[:, 1:] > 0))
     yb, xb = np.nonzero((vor[:-1, :] != vor[1:, :]) & (vor[:-1, :] > 0) & (vor[1:, :] > 0))
@@ -154,7 +163,16 @@ def adjacency(contours: list, shape: tuple[int, int], min_contact: float = 0.45)
     order = np.argsort(-contact, axis=1)[:, :4]
     top4[np.arange(N)[:, None], order] = True
     keep = strong & top4
-    return keep & keep.T
+    A = keep & keep.T
+    # a grid graph has no triangles: a diagonal link closes one with the
+    # common neighbour(s); drop the weakest edge of any triangle, one at a time
+    while True:
+        Ai = A.astype(np.int32)
+        tri = A & ((Ai @ Ai) > 0)
+        if not tri.any():
+            return A
+        i, j = np.unravel_index(np.argmin(np.where(tri, contact, np.inf)), A.shape)
+        A[i, j] = A[j, i] = False
 
 
 def _bfs(A: np.ndarray, start: int) -> np.ndarray:

@@ -145,7 +145,7 @@ def detect_pose(
         q, ok = rough_corners(frames, [c for c, l in zip(contours, large) if l], centroids[large])
         rough[np.flatnonzero(large)[ok]] = q[ok]
     try:
-        labels = grid_labels(adjacency(contours, frames.shape[1:]), layout.nx, layout.ny)
+        labels = grid_labels(adjacency(contours, frames.shape[1:], el.lattice - (x0, y0)), layout.nx, layout.ny)
         labels = orient(labels, rough, frames[0], layout.nx, layout.ny, layout.marker)
     except GridError as e:
         return _fail(layout, str(e))
