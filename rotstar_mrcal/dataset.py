@@ -30,6 +30,7 @@ a one-line message that names the file and the reason.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -100,11 +101,29 @@ def list_poses(seq: str, frames: list[dict] | None = None) -> list[str]:
     ]
 
 
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence the C-level stderr (file descriptor 2) for the duration"""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 def read_image(fn: str) -> tuple[np.ndarray, float]:
     """A grayscale 8- or 16-bit PNG as float32, and its full scale"""
     if not os.path.exists(fn):
         raise DatasetError(f"{fn}: missing frame")
-    img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+    with _quiet_stderr():  # libpng prints its own error lines; ours is the one that counts
+        img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
     if img is None:
         raise DatasetError(f"{fn}: not a readable image (corrupt or not PNG)")
     if img.ndim == 3:
@@ -135,11 +154,13 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         img, fs = read_image(fn)
         imgs.append(img)
         scales.add(fs)
-    shapes = {im.shape for im in imgs}
-    if len(shapes) > 1:
+    shapes = [im.shape for im in imgs]
+    if len(set(shapes)) > 1:
+        common = max(set(shapes), key=shapes.count)  # the size most frames have
+        odd = next(k for k, s in enumerate(shapes) if s != common)
         raise DatasetError(
-            f"{rot_files[[im.shape for im in imgs].index(sorted(shapes)[-1])]}: frame size differs from "
-            f"the others ({' vs '.join(f'{s[1]}x{s[0]}' for s in sorted(shapes))})"
+            f"{rot_files[odd]}: frame size {shapes[odd][1]}x{shapes[odd][0]} differs from the others "
+            f"({common[1]}x{common[0]})"
         )
     if len(scales) > 1:
         raise DatasetError(f"{folder}: frames mix 8- and 16-bit PNGs")

@@ -29,8 +29,13 @@ from __future__ import annotations
 import numpy as np
 
 
+def mrcal_can_read(fn: str) -> bool:
+    """mrcal's corners.vnl parser needs ASCII file names without whitespace"""
+    return fn.isascii() and not any(c.isspace() for c in fn)
+
+
 def _check_name(fn: str) -> str:
-    if not fn.isascii() or any(c.isspace() for c in fn):
+    if not mrcal_can_read(fn):
         raise ValueError(f"{fn!r}: mrcal needs ASCII file names without whitespace")
     return fn
 

@@ -16,9 +16,10 @@ class Progress:
     def __init__(self, n: int, quiet: bool = False):
         self.n, self.k, self.quiet, self.t0 = n, 0, quiet, time.monotonic()
 
-    def step(self, label: str, msg: str) -> None:
+    def step(self, label: str, msg: str, important: bool = False) -> None:
+        """One line per item; with quiet, only the important ones (failures)"""
         self.k += 1
-        if not self.quiet:
+        if not self.quiet or important:
             el = time.monotonic() - self.t0
             eta = el / self.k * (self.n - self.k)
             tail = f"  ({el:.0f} s, ~{eta:.0f} s left)" if self.n > 3 and el > 2 else ""

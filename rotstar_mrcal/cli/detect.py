@@ -13,7 +13,7 @@ import numpy as np
 from .. import dataset
 from ..detect.pipeline import REFINERS, detect_pose
 from ..focal import estimate_focal
-from ..vnl import write_corners
+from ..vnl import mrcal_can_read, write_corners
 from .common import Progress, say
 
 DESCRIPTION = """\
@@ -57,12 +57,15 @@ def parse_args(argv=None):
                    help="reject a pose whose frames disagree by more than this many pixels "
                         "(the camera moved during the sequence; default 0.15)")
     p.add_argument("--jobs", "-j", type=int, default=1, help="poses processed in parallel (default 1)")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress lines (skipped poses are still reported)")
     return p.parse_args(argv)
 
 
 def _detect_one(seq, pose, frames, layout, opts):
     """Worker: returns (pose, first file, PoseCorners or None, message, imagersize)"""
+    if not mrcal_can_read(os.path.join(seq, pose)):
+        return pose, None, None, (f"{os.path.join(seq, pose)}: mrcal cannot read file names with whitespace "
+                                  "or non-ASCII characters; rename the folder (left out of the output)"), None
     try:
         p = dataset.load_pose(seq, pose, frames)
     except dataset.DatasetError as e:
@@ -117,7 +120,7 @@ def main(argv=None) -> int:
             extra = f", {r.motion_px:.3f} px frame motion" if r.motion_px else ""
             progress.step(pose, f"{r.n_valid} of {layout.nx * layout.ny} corners{extra}")
         else:
-            progress.step(pose, f"skipped: {msg}")
+            progress.step(pose, f"skipped: {msg}", important=True)
 
     if a.jobs > 1 and len(poses) > 1:
         with cf.ProcessPoolExecutor(max_workers=a.jobs) as ex:
@@ -133,6 +136,8 @@ def main(argv=None) -> int:
     for pose in poses:
         _, fn, r, msg, size = results[pose]
         fn = fn or os.path.join(a.seq, pose, first_frame)
+        if not mrcal_can_read(fn):
+            continue  # reported above; mrcal could not parse the row
         if r is not None and r.found:
             boards.append((fn, r.corners))
             weights.append(corner_weights(r))

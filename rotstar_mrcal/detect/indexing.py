@@ -96,7 +96,7 @@ def adjacency_quads(quads: np.ndarray, ratio: float = 1.0) -> np.ndarray:
 
 
 def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None = None,
-              min_contact: float = 0.45) -> np.ndarray:
+              min_contact: float = 0.3) -> np.ndarray:
     """Boolean (N, N) adjacency of elements by shared border in the band lattice
 
     Every pixel between the elements is given to the nearest element (a
@@ -105,15 +105,15 @@ def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None
     element long; diagonal neighbours touch only where the bands cross, so
     boundary pixels with a third element about as near (within 25%) are not
     counted; nor are pixels outside `lattice` (the outer contour of the border
-    lattice), where the corner elements' neighbours would meet around them. Each element keeps its (up to) four longest boundaries that are
-    longer than `min_contact` times the smaller element's mean side (the
-    square root of its area; foreshortening can make the contact across the
-    short direction about half of that), and two elements are linked when
-    each keeps the other. A grid has no triangles, so of any three mutually
-    linked elements the weakest link is dropped (strong shear can give the
-    two elements beside a border corner a real shared boundary across the
-    crossing). Unlike rules on the elements' outlines (such as the
-    paper's vertex distance, see adjacency_quads) this holds under shear,
+    lattice), where the corner elements' neighbours would meet around them.
+    Two elements are linked when their boundary is longer than `min_contact`
+    times the smaller element's mean side (the square root of its area;
+    foreshortening can make the contact across the short direction a
+    quarter of that). Under strong shear (steep tilts about a diagonal) the
+    two elements on the short diagonal of a band crossing can share a real
+    boundary; a grid graph has no triangles, so such links are pruned
+    (prune_triangles). Unlike rules on the elements' outlines (such as the paper's vertex
+    distance, see adjacency_quads) this holds under shear,
     steep perspective and blur.
     """
     import scipy.ndimage as ndi
@@ -158,20 +158,27 @@ def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None
     np.add.at(contact, (a, b), 1)
     contact = contact + contact.T
     np.fill_diagonal(contact, 0)
-    strong = contact > np.maximum(2.0, min_contact * np.minimum(side[:, None], side[None, :]))
-    top4 = np.zeros_like(strong)
-    order = np.argsort(-contact, axis=1)[:, :4]
-    top4[np.arange(N)[:, None], order] = True
-    keep = strong & top4
-    A = keep & keep.T
-    # a grid graph has no triangles: a diagonal link closes one with the
-    # common neighbour(s); drop the weakest edge of any triangle, one at a time
+    A = contact > np.maximum(2.0, min_contact * np.minimum(side[:, None], side[None, :]))
+    return prune_triangles(A, contact)
+
+
+def prune_triangles(A: np.ndarray, strength: np.ndarray) -> np.ndarray:
+    """Drop links until no three elements are mutually linked
+
+    A grid graph has no triangles; a diagonal link closes one with each
+    common neighbour of its two elements. The link that shares the most
+    common neighbours goes first (a diagonal inside a complete square has
+    two, a side link at most as many as there are wrong diagonals next to
+    it), ties broken by the weaker shared boundary.
+    """
+    A = A.copy()
     while True:
         Ai = A.astype(np.int32)
-        tri = A & ((Ai @ Ai) > 0)
-        if not tri.any():
+        common = np.where(A, Ai @ Ai, 0)
+        if not common.any():
             return A
-        i, j = np.unravel_index(np.argmin(np.where(tri, contact, np.inf)), A.shape)
+        top = common.max()
+        i, j = np.unravel_index(np.argmin(np.where(common == top, strength, np.inf)), A.shape)
         A[i, j] = A[j, i] = False
 
 

@@ -125,10 +125,15 @@ def detect_pose(
     mask, _ = binarize(resp)
     el = element_boundaries(mask)
     n_expected = layout.nx * layout.ny
-    if el.touches_edge:
+    if el.touches_edge and len(el.contours) <= 2 * n_expected:
         return _fail(layout, f"board partly out of view (the border lattice reaches the image edge; {len(el.contours)} of {n_expected} elements inside)")
     if len(el.contours) != n_expected:
-        hint = " (camera moved during the sequence? wrong pattern.json?)" if len(el.contours) else " (no rotating-star pattern found)"
+        if not el.contours:
+            hint = " (no rotating-star pattern found)"
+        elif len(el.contours) > 2 * n_expected:
+            hint = " (the response map is dominated by noise: too dark or too noisy?)"
+        else:
+            hint = " (camera moved during the sequence? wrong pattern.json?)"
         return _fail(layout, f"found {len(el.contours)} elements, expected {layout.nx}x{layout.ny} = {n_expected}{hint}")
     # work on the board's bounding box from here on (all stages are local)
     H, W = frames.shape[1:]
@@ -173,7 +178,7 @@ def detect_pose(
             return _fail(layout, f"--refine {refine} needs the checkerboard frame, which this pose lacks")
         from . import baselines
 
-        cb = np.asarray(checkerboard, np.float32)
+        cb = np.asarray(checkerboard, np.float32)[y0:y1, x0:x1]  # the same crop as the frames
         wi = max(int(np.floor(np.median(w))), 2)
         if refine == "opencv":
             q = baselines.opencv_subpix(cb, rough, win=wi, full_scale=full_scale)

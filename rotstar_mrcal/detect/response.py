@@ -5,7 +5,7 @@ SYNOPSIS
     >>> import numpy as np
     >>> from rotstar_mrcal.detect.response import response_map, binarize
     >>> frames = np.zeros((8, 20, 20), np.float32); frames[::2, 5:15, 5:8] = 200
-    >>> resp = response_map(frames)
+    >>> resp = response_map(frames, smooth_sigma=0)
     >>> mask, threshold = binarize(resp, smooth=1)
     >>> int(mask.sum()), bool(mask[10, 6]), bool(mask[10, 12])
     (30, True, False)
@@ -38,12 +38,17 @@ def intensity_estimate(frames: np.ndarray) -> np.ndarray:
     return np.maximum(m, FLOOR_FRACTION * float(m.max()) + 1e-12)
 
 
-def response_map(frames: np.ndarray) -> np.ndarray:
+def response_map(frames: np.ndarray, smooth_sigma: float = 1.0) -> np.ndarray:
     """Accumulated |frame[k+1] - frame[k]|, divided by the intensity estimate
 
-    frames: (nframes, H, W) in any units. Returns (H, W) float32.
+    frames: (nframes, H, W) in any units. Returns (H, W) float32. Each frame
+    is smoothed by a Gaussian of smooth_sigma px first: noise in dark regions,
+    divided by the floored intensity estimate, would otherwise reach the level
+    of the bands (the response only needs to find the bands, a few px wide).
     """
     f = np.asarray(frames, np.float32)
+    if smooth_sigma > 0:
+        f = np.stack([cv2.GaussianBlur(k, (0, 0), smooth_sigma) for k in f])
     acc = np.zeros(f.shape[1:], np.float32)
     for a, b in zip(f[:-1], f[1:]):
         acc += cv2.absdiff(b, a)

@@ -1,0 +1,96 @@
+"""Shared fixtures of the detector tests: one simulated D435 dataset per session
+
+The dataset (rendered once, ~12 s on 2 cores) is what a user would record with
+an Intel RealSense D435 (1280x800, 16-bit, mild OPENCV8 distortion, Gaussian
+blur of 1 px, 1% noise) looking at the default screen layout (14 x 9 corners,
+pitch 150, band 40): eight random poses spread over the imager (tilts up to
+50 degrees) and four chosen ones, named in ROLES:
+
+    closeup   0.2 m away, 20 degrees: elements of ~30 px, where the pipeline
+              starts the refinement from the rough corners (not the centroids)
+    steep55a  55 degrees of tilt about the board's x axis
+    steep55b  55 degrees about the board's diagonal
+    steep60   60 degrees (the upper end of random_poses' default range)
+
+The tests compare everything with the simulator's truth (seq/truth.json,
+seq/truth.cameramodel). The command-line tools are run from the venv that
+runs the tests (its bin/ first on PATH, as `make test` does).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rotstar_mrcal.pattern.layout import Layout, make_layout
+from rotstar_mrcal.simulate import Settings, Truth, look_at_pose, preset_model, random_poses, write_dataset
+
+VENV_BIN = os.path.dirname(sys.executable)
+D435_SETTINGS = Settings(bits=16, seed=0)  # blur 1 px, noise 1%, gain 0.9, area sampling
+N_RANDOM = 8
+ROLES = {"closeup": "pose008", "steep55a": "pose009", "steep55b": "pose010", "steep60": "pose011"}
+
+
+@dataclasses.dataclass
+class SimSeq:
+    """A simulated dataset on disk and its truth"""
+
+    path: str
+    truth: Truth
+    layout: Layout
+
+    @property
+    def model(self):
+        return self.truth.model
+
+    @property
+    def poses(self) -> list[str]:
+        return self.truth.poses
+
+    def corners(self, pose: str) -> np.ndarray:
+        return self.truth.corners[pose]
+
+    def rt(self, pose: str) -> np.ndarray:
+        return self.truth.rt_cam_board[pose]
+
+
+def d435_poses(model, layout) -> np.ndarray:
+    rts = list(random_poses(model, layout, N_RANDOM, np.random.default_rng(0), max_tilt_deg=50.0))
+    deg = math.radians
+    rts.append(look_at_pose(model, layout, (640.0, 400.0), 0.2, tilt=deg(20), tilt_axis=deg(30), roll=0.15))
+    rts.append(look_at_pose(model, layout, (520.0, 360.0), 0.45, tilt=deg(55), tilt_axis=0.0, roll=0.3))
+    rts.append(look_at_pose(model, layout, (760.0, 440.0), 0.45, tilt=deg(55), tilt_axis=deg(45), roll=-0.4))
+    rts.append(look_at_pose(model, layout, (640.0, 400.0), 0.45, tilt=deg(60), tilt_axis=0.0, roll=0.3))
+    return np.array(rts)
+
+
+@pytest.fixture(scope="session")
+def d435_seq(tmp_path_factory) -> SimSeq:
+    model, layout = preset_model("d435"), make_layout()
+    seq = str(tmp_path_factory.mktemp("d435") / "seq")
+    truth = write_dataset(seq, layout, model, d435_poses(model, layout), D435_SETTINGS, jobs=2,
+                          extra={"camera": "d435"})
+    return SimSeq(seq, truth, layout)
+
+
+def cli_env() -> dict:
+    env = dict(os.environ)
+    env["PATH"] = VENV_BIN + os.pathsep + env.get("PATH", "")
+    return env
+
+
+@pytest.fixture(scope="session")
+def run_cli():
+    """run_cli('rotstar-detect', arg, ...) -> CompletedProcess (text, captured)"""
+
+    def run(tool: str, *args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
+        return subprocess.run([os.path.join(VENV_BIN, tool), *map(str, args)], capture_output=True, text=True,
+                              cwd=cwd, env=cli_env(), timeout=timeout)
+
+    return run
