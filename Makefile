@@ -42,10 +42,11 @@ $(CURDIR)/.tools/bin/uv: | check-python
 
 system-deps:
 	@missing=""; command -v mrgingham >/dev/null || missing="$$missing mrgingham"; \
+	[ -x /usr/bin/chromium ] || missing="$$missing chromium"; \
 	if [ -n "$$missing" ]; then \
 	  echo "installing Debian packages:$$missing" >&2; \
-	  if [ "$$(id -u)" = 0 ]; then (apt-get update -qq && apt-get install -y -qq $$missing) >&2 || echo "warning: could not install$$missing; its baseline will be skipped" >&2; \
-	  else echo "warning: not root, cannot apt-get install$$missing; its baseline will be skipped" >&2; fi; \
+	  if [ "$$(id -u)" = 0 ]; then (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing) >&2 || echo "warning: could not install$$missing; the tests that need them will be skipped" >&2; \
+	  else echo "warning: not root, cannot apt-get install$$missing; the tests that need them will be skipped" >&2; fi; \
 	fi
 
 .venv/.synced: pyproject.toml uv.lock $(UV) | check-python

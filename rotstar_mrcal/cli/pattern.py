@@ -9,6 +9,7 @@ import sys
 
 import cv2
 
+from ..display.player import write_player
 from ..pattern.layout import make_layout
 from ..pattern.render import encode_display, render_frame
 from .common import say
@@ -23,7 +24,7 @@ rotstar-detect needs beside the recorded poses, and prints the mrcal object
 arguments on stderr.
 
 Show the PNGs at exactly one image pixel per display pixel (no scaling, no
-smoothing). The defaults fit an 11-inch iPad Pro (2360x1640, 264 ppi) filmed by
+smoothing). The defaults fit a 10.9-inch iPad Air or iPad 10 (2360x1640, 264 ppi, the paper's screen) filmed by
 a D435-class camera (1280x800, ~90 degrees) at 0.3-0.6 m.
 """
 
@@ -88,6 +89,7 @@ def main(argv=None) -> int:
     with open(os.path.join(a.out, "pattern.json"), "w") as fh:
         json.dump(d, fh, indent=2)
         fh.write("\n")
+    say(f"wrote {write_player(a.out)}: open it on the screen, full screen (doc/capture.md)")
     say(f"{layout.nx}x{layout.ny} corners, pitch {layout.pitch} px = {layout.spacing_m * 1000:.4f} mm, "
         f"marker element {layout.marker}; wrote {a.out}/pattern.json")
     say("mrcal object arguments: " + " ".join(layout.mrcal_object_args()))

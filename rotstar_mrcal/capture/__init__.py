@@ -1,0 +1,40 @@
+"""Recording the screen: camera backends, the D435 preset, splitting a recording into frames
+
+SYNOPSIS
+
+    >>> import numpy as np
+    >>> from rotstar_mrcal.capture import ArraySource, record, threshold, stable_runs
+    >>> rec = record(ArraySource(np.zeros((6, 4, 4), np.uint8)), 6)
+    >>> rec.frames.shape, rec.full_scale
+    ((6, 4, 4), 255.0)
+
+Modules, one concept each:
+
+    v4l2               the V4L2 ioctl layer: structures, format negotiation,
+                       controls, mmap streaming; all system calls behind
+                       Syscalls (tests substitute a fake device)
+    uvc_xu             UVC extension-unit queries (UVCIOC_CTRL_QUERY); the
+                       D4xx depth unit's selectors
+    d435               the D435 preset: find the IR node by USB id and
+                       formats, Y16 1280x800 by default, exposure in us and
+                       the emitter through the extension unit
+    source             FrameSource (what a backend is), Frame, record()
+    backend_v4l2       a V4L2 node as a FrameSource (the default backend)
+    backend_libcamera  libcamera's `cam` tool as a FrameSource (experimental)
+    backend_realsense  pyrealsense2 as a FrameSource (optional)
+    backend_replay     a recording (folder of frames, .npy, .raw, video)
+    backends           open a backend by name
+    motion             frame differences, stillness, affine drift
+    segment            a recording of the looping player -> its frames
+    pose               one pose: segmented frames -> dataset folder, quick check
+    coverage           which parts of the imager the detected corners cover
+    simulated          simulated recordings of the player, for tests
+
+See doc/capture.md.
+"""
+
+from .segment import Options, SegmentError, Segmentation, segment, stable_runs, threshold
+from .source import ArraySource, CaptureError, ControlError, Frame, FrameSource, Recording, record
+
+__all__ = ["Options", "SegmentError", "Segmentation", "segment", "stable_runs", "threshold",
+           "ArraySource", "CaptureError", "ControlError", "Frame", "FrameSource", "Recording", "record"]

@@ -1,0 +1,130 @@
+"""Simulated recordings of the looping player: what a camera streams while the screen plays
+
+SYNOPSIS
+
+    >>> import numpy as np
+    >>> from rotstar_mrcal.capture.simulated import player_schedule, camera_stream
+    >>> sched = player_schedule(3, hold=6, refresh_hz=60, duration=1.0)
+    >>> [(s.entry, round(s.t0, 2)) for s in sched[:4]]
+    [(0, 0.0), (1, 0.1), (2, 0.2), (0, 0.3)]
+    >>> E = np.stack([np.full((4, 5), v) for v in (0.0, 0.5, 1.0)])   # irradiance of each entry
+    >>> img, seq = camera_stream(E, sched, 8, fps=20, t0=0.095, exposure_s=0.01, scan_s=0.0,
+    ...                          noise=0, bits=8, drop_frames=[6])
+    >>> img[:, 0, 0].tolist(), seq.tolist()       # even frames straddle a change; frame 6 lost
+    ([57, 115, 172, 230, 115, 0, 115], [0, 1, 2, 3, 4, 5, 7])
+
+Built on the simulator (rotstar_mrcal.simulate): render the irradiance of
+every loop entry once (loop_irradiance: the screen showing the start marker
+and the pattern frames, seen from one pose), then make the camera stream
+from it:
+
+- player_schedule: when each loop entry is on the screen. Each entry is held
+  for `hold` refreshes (the marker for marker_hold); `start_entry` and
+  `start_phase` start the recording mid-loop; `drop` skips display frames
+  and `double` holds them twice as long (numbers count shown frames from
+  the start, 0, 1, 2, ...);
+- camera_stream: camera frame i integrates [t0 + i / fps, + exposure_s].
+  The panel updates row by row over scan_s, so camera row y sees the
+  change at (switch time + scan_s * y / H): a frame that straddles a change
+  is a row-dependent blend of two entries. Then the sensor (simulate.expose:
+  gain, noise, quantisation), frames listed in drop_frames are lost (a gap
+  in the sequence numbers), and drift_px moves the image by that much per
+  frame (a camera that is not still).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from ..display.loop import player_loop
+from ..simulate.exposure import expose
+from ..simulate.render import render_irradiance
+from ..simulate.screen import exact_frames, make_screen
+
+
+def loop_irradiance(layout, model, rt_cam_board, supersample: int = 4, psf=1.0, room: float = 0.02,
+                    frames: np.ndarray | None = None) -> np.ndarray:
+    """(n_entries, H, W) irradiance of every entry of the player's loop, marker first
+
+    The same rendering as simulate.write_dataset with its default Settings
+    (exact frames, room 0.02, supersample 4, Gaussian PSF of 1 px), so a
+    recording built from it and a directly rendered dataset see the same
+    images up to noise.
+    """
+    fr = exact_frames(layout) if frames is None else np.asarray(frames, np.float32)
+    if len(player_loop(layout.frames())) != len(fr) + 1:
+        raise ValueError(f"{len(fr)} frames for the layout's {len(layout.frames())}")
+    screen = make_screen(np.concatenate([np.zeros_like(fr[:1]), fr]), layout, room)
+    return render_irradiance(screen, model, rt_cam_board, supersample=supersample, psf=psf)
+
+
+@dataclasses.dataclass(frozen=True)
+class Shown:
+    entry: int  # loop entry on the screen
+    t0: float  # seconds: the top row switches to it
+    t1: float  # seconds: the top row switches away
+
+
+def player_schedule(n_entries: int, hold: int, marker_hold: int | None = None, refresh_hz: float = 60.0,
+                    duration: float = 10.0, start_entry: int = 0, start_phase: float = 0.0,
+                    drop=(), double=()) -> list[Shown]:
+    """What the player shows from t = 0 to duration (seconds)"""
+    mh = marker_hold or hold
+    drop, double = set(drop), set(double)
+    out = []
+    t = None
+    g = 0
+    while t is None or t < duration:
+        e = (start_entry + g) % n_entries
+        n = (mh if e == 0 else hold) * (2 if g in double else 1)
+        if t is None:
+            t = -start_phase * n / refresh_hz if start_phase else 0.0
+        if g not in drop:
+            out.append(Shown(e, t, t + n / refresh_hz))
+            t += n / refresh_hz
+        g += 1
+    return out
+
+
+def blend_weights(sched: list[Shown], a: float, b: float, rows: int, scan_s: float) -> dict[int, np.ndarray]:
+    """{entry: (rows,) fraction of the exposure [a, b] each camera row sees it}"""
+    delay = scan_s * (np.arange(rows) + 0.5) / rows
+    out: dict[int, np.ndarray] = {}
+    for s in sched:
+        if s.t1 + scan_s <= a or s.t0 >= b:
+            continue
+        w = np.clip(np.minimum(b, s.t1 + delay) - np.maximum(a, s.t0 + delay), 0, None) / (b - a)
+        if w.any():
+            out[s.entry] = out.get(s.entry, 0) + w
+    return out
+
+
+def camera_stream(E: np.ndarray, sched: list[Shown], n: int, fps: float = 25.0, exposure_s: float = 0.016,
+                  scan_s: float = 1 / 60, t0: float = 0.0, gain: float = 0.9, noise: float = 0.01,
+                  bits: int = 16, value_bits: int | None = None, drop_frames=(), drift_px=(0.0, 0.0),
+                  rng=0) -> tuple[np.ndarray, np.ndarray]:
+    """(frames (n - dropped, H, W) uint8/uint16, sequence numbers) of the camera filming the schedule
+
+    E: (n_entries, H, W) irradiance of every loop entry (entry 0 the marker).
+    """
+    rng = np.random.default_rng(rng)
+    H, W = E.shape[1:]
+    drop_frames = set(drop_frames)
+    frames, seq = [], []
+    for i in range(n):
+        a = t0 + i / fps
+        w = blend_weights(sched, a, a + exposure_s, H, scan_s)
+        if i in drop_frames:
+            continue
+        img = np.zeros((H, W))
+        for e, we in w.items():
+            img += we[:, None] * E[e]
+        if drift_px[0] or drift_px[1]:
+            M = np.float32([[1, 0, drift_px[0] * i], [0, 1, drift_px[1] * i]])
+            img = cv2.warpAffine(img, M, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        frames.append(expose(img, gain=gain, noise=noise, bits=bits, value_bits=value_bits, rng=rng))
+        seq.append(i)
+    return np.stack(frames), np.array(seq)

@@ -1,0 +1,200 @@
+"""rotstar-segment: a recording of the looping player in, one dataset pose folder out"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+from .. import dataset
+from ..capture.backend_replay import ReplaySource
+from ..capture.pose import quick_check, value_scale, write_segmented
+from ..capture.segment import Options, SegmentError, segment
+from ..capture.source import CaptureError
+from .common import say
+
+DESCRIPTION = """\
+Split a continuous recording of player.html (the start marker, then every
+frame of pattern.json, in a loop) into the displayed frames: stable
+stretches between the transitions are found from the mean absolute
+difference of consecutive camera frames, the middle frames of each stretch
+are averaged, and the order is fixed by the start marker and checked against
+pattern.json. Writes OUT/<file> for every frame of pattern.json (16-bit PNG)
+and OUT/segment.json, and copies pattern.json into OUT's parent, so that
+`rotstar-detect` reads the parent folder directly. A quick detection of the
+board follows (skip it with --no-check).
+
+RECORDING is a folder of frames (PNG/TIFF/PGM, 8 or 16 bit, in natural name
+order), a .npy array (T, H, W) with an optional .json of sequence numbers
+beside it (what rotstar-capture --keep-raw writes), a raw dump of
+`v4l2-ctl --stream-to` (needs --size and --fourcc), or a video file (8-bit,
+usually lossy: a last resort).
+
+Progress and the verdict go to stderr; stdout gets the pose folder only.
+Exit status: 0 written, 1 the recording cannot be split (the reason is
+printed), 2 bad input.
+"""
+
+EPILOG = """\
+example:
+  rotstar-segment rec/pose000.npy --pattern pattern/pattern.json --out seq/pose000
+  rotstar-detect seq/ > corners.vnl
+"""
+
+
+def _size(s: str) -> tuple[int, int]:
+    try:
+        w, h = s.lower().split("x")
+        return int(w), int(h)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{s!r}: expected WIDTHxHEIGHT") from None
+
+
+def _scale(s: str):
+    if s == "auto":
+        return s
+    try:
+        return float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{s!r}: 'auto' or a number") from None
+
+
+def add_segment_options(p: argparse.ArgumentParser) -> None:
+    """The options segmentation shares with rotstar-capture"""
+    d = Options()
+    g = p.add_argument_group("segmentation")
+    g.add_argument("--average", type=int, default=d.average,
+                   help=f"middle frames of each stretch averaged (default {d.average}, as the paper)")
+    g.add_argument("--guard", type=int, default=d.guard,
+                   help=f"frames dropped at each end of a stretch (default {d.guard})")
+    g.add_argument("--min-len", type=int, default=d.min_len,
+                   help=f"camera frames in the shortest stable stretch (default {d.min_len})")
+    g.add_argument("--threshold-k", type=float, default=d.k,
+                   help=f"change threshold: median + K robust sigmas of the difference signal (default {d.k:g})")
+    g.add_argument("--max-motion", type=float, default=d.max_motion,
+                   help=f"reject a loop over which the image drifts more than this many pixels (default {d.max_motion:g})")
+    g.add_argument("--max-jitter", type=float, default=d.max_jitter,
+                   help=f"frames between the player's changes may differ by this many times the sensor noise "
+                        f"(default {d.max_jitter:g}; raise it for a screen whose brightness flickers)")
+    g.add_argument("--scale", type=_scale, default="auto",
+                   help="multiply 16-bit values before writing: 'auto' scales data that only reaches 10 or 12 "
+                        "bits up to 16 (default), 1 keeps them")
+
+
+def options_from(a) -> Options:
+    return Options(average=a.average, guard=a.guard, min_len=a.min_len, k=a.threshold_k, max_motion=a.max_motion,
+                   max_jitter=a.max_jitter)
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(prog="rotstar-segment", description=DESCRIPTION, epilog=EPILOG,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("recording", help="folder of frames, .npy, .raw or video file")
+    p.add_argument("--pattern", required=True, help="pattern.json (or the folder holding it) that the player showed")
+    p.add_argument("--out", "-o", required=True, help="the pose folder to write, SEQ/<pose>")
+    p.add_argument("--size", type=_size, help="WIDTHxHEIGHT of a .raw recording")
+    p.add_argument("--fourcc", help="pixel format of a .raw recording: GREY, Y16 or Y8I")
+    p.add_argument("--plot", metavar="PNG", help="also plot the difference signal, the threshold and the stretches")
+    p.add_argument("--no-check", action="store_true", help="do not run the quick board detection")
+    p.add_argument("--force", action="store_true", help="overwrite a pose folder that already holds frames")
+    add_segment_options(p)
+    return p.parse_args(argv)
+
+
+def plot_signal(fn: str, seg, title: str) -> None:
+    """The difference signal with the threshold, the stretches and the frames averaged"""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(12, 4))
+    ax.semilogy(seg.d, lw=0.8, color="k", label="mean |difference| (fraction of full scale)")
+    ax.axhline(seg.tau, color="r", lw=0.8, label="threshold")
+    used = set(seg.loop.stretches)
+    for k, s in enumerate(seg.stretches):
+        colour = "tab:purple" if seg.markers[k] else "tab:green" if k in used else "tab:gray"
+        ax.axvspan(s.start, s.stop - 0.5, color=colour, alpha=0.15, lw=0)
+        ax.axvspan(s.core[0], s.core[1] - 0.5, color=colour, alpha=0.35, lw=0)
+    ax.set_xlabel("camera frame")
+    ax.set_title(title + "\n" + seg.summary(), fontsize=9)
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(fn, dpi=100)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    a = parse_args(argv)
+    try:
+        pattern, layout = dataset.read_pattern(a.pattern)
+    except dataset.DatasetError as e:
+        say(f"rotstar-segment: {e}")
+        return 2
+    out = os.path.normpath(a.out)
+    seq, pose = os.path.dirname(out) or ".", os.path.basename(out)
+    names = {f["file"] for f in pattern["frames"]}
+    if os.path.isdir(out) and names & set(os.listdir(out)) and not a.force:
+        say(f"rotstar-segment: {out} already holds frames (use --force to overwrite)")
+        return 2
+    try:
+        src = ReplaySource(a.recording, size=a.size, fourcc=a.fourcc)
+        frames = src.frames()
+    except CaptureError as e:
+        say(f"rotstar-segment: {e}")
+        return 2
+    for note in src.notes:
+        say(f"rotstar-segment: note: {note}")
+    say(f"rotstar-segment: {a.recording}: {len(frames)} frames of {frames.shape[2]}x{frames.shape[1]}, "
+        f"{'16' if src.full_scale == 65535 else '8'}-bit")
+    seqnums = src.sequence_numbers()
+    gaps = int(sum(max(int(b) - int(a_) - 1, 0) for a_, b in zip(seqnums[:-1], seqnums[1:])))
+    if gaps:
+        say(f"rotstar-segment: note: {gaps} camera frame(s) were dropped (gaps in the sequence numbers)")
+    try:
+        seg = segment(frames, pattern["frames"], layout, src.full_scale, options_from(a))
+    except SegmentError as e:
+        say(f"rotstar-segment: {a.recording}: {e}")
+        return 1
+    say(f"rotstar-segment: {seg.summary()}")
+    for v in seg.loops:
+        if not v.ok:
+            say(f"rotstar-segment:   loop at frame {seg.stretches[v.marker].start} not used: {v.reason}")
+    if a.scale == "auto":
+        import numpy as np
+
+        scale, note = value_scale(max(float(np.max(img)) for img in seg.images.values()), src.full_scale)
+        if note:
+            say(f"rotstar-segment: note: {note}")
+    else:
+        scale = float(a.scale)
+    try:
+        folder = write_segmented(seq, pose, seg, pattern, src.full_scale, scale,
+                                 {"recording": os.path.abspath(a.recording), "dropped_camera_frames": gaps})
+    except (dataset.DatasetError, OSError, ValueError) as e:
+        say(f"rotstar-segment: {e}")
+        return 2
+    if a.plot:
+        plot_signal(a.plot, seg, a.recording)
+        say(f"rotstar-segment: wrote {a.plot}")
+    if not a.no_check:
+        r = quick_check(seg, layout, pattern, src.full_scale / scale)  # the averages are not scaled yet
+        n = layout.nx * layout.ny
+        if r.found:
+            say(f"rotstar-segment: board found: {r.n_valid} of {n} corners"
+                + (" (complete)" if r.n_valid == n else "") + f", frames agree to {r.motion_px:.3f} px")
+        else:
+            say(f"rotstar-segment: no board: {r.error}")
+        with open(os.path.join(folder, "segment.json")) as f:
+            info = json.load(f)
+        info["quick_check"] = {"found": r.found, "corners": r.n_valid, "error": r.error, "motion_px": r.motion_px}
+        with open(os.path.join(folder, "segment.json"), "w") as f:
+            json.dump(info, f, indent=1, default=float)
+            f.write("\n")
+    print(folder)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
