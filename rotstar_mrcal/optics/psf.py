@@ -1,0 +1,280 @@
+"""The PSF of a wavefront: H = A |F(P exp(2 pi i W))|^2, sampled at the renderer's sub-pixels
+
+SYNOPSIS
+
+    >>> import numpy as np
+    >>> from rotstar_mrcal.optics import Optics, Seidel, wavefront_psf
+    >>> optics = Optics(wavelength_um=0.55, fnumber=2.0, pixel_um=3.0)
+    >>> round(optics.lambda_fnum_px, 4)                  # lambda N / pixel pitch
+    0.3667
+    >>> k = wavefront_psf(Seidel(coma=4.0), optics, supersample=4)
+    >>> k.shape[0] % 2, round(float(k.sum()), 12)        # odd, centred, unit sum
+    (1, 1.0)
+    >>> centroid_px(k, 4)[0] > 1                         # the comet's tail points to +x
+    np.True_
+
+The image-plane field is the Fourier transform of the pupil function. With
+the pupil sampled on an N x N grid and a pupil radius of R samples, one FFT
+bin is 2 R lambda_fnum_px / N camera pixels (lambda_fnum_px = wavelength *
+F-number / pixel pitch). N and R are chosen so that a bin is 1/m of a
+sub-pixel (m odd, large enough for m * s * lambda_fnum_px >= 2: Nyquist for
+the intensity), the pupil is sampled finely enough for the steepest
+wavefront slope (R >= 4 max|dW/drho| and R >= 24) and the grid holds twice
+the geometric spot (whose radius is 2 lambda_fnum_px max|dW/drho| pixels).
+The intensity is then integrated over m x m bins (one sub-pixel each),
+cropped to the smallest centred odd square that keeps all but `tail` of the
+energy, and normalised to unit sum.
+
+Orientation: the image coordinates are the FFT frequencies, so a wavefront
+slope dW/dx > 0 moves light toward +x: a ray through pupil point (x, y)
+lands at 2 lambda_fnum_px grad W (pixels) from the ideal image point. Seidel
+coma W_coma rho^3 cos(theta - a) > 0 thus draws a comet whose head sits at the
+ideal image point and whose tail points along a (3 x 2 lambda_fnum_px W_coma
+pixels long). The kernel follows the orientation of simulate.optics
+(tap [r, c] moves light r - h//2 sub-pixels down and c - w//2 right): it
+plugs into the foundation's renderer as `psf=kernel` (KernelPSF), as
+`psf=SeidelPSF(...)` (any supersampling), or field-dependent as
+`psf=radial_psf(...)` (TiledPSF, coma and astigmatism along the field
+radius).
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+
+import numpy as np
+
+from ..simulate.optics import TiledPSF, convolve
+from .wavefront import Seidel, pupil_function
+
+DEFAULT_TAIL = 2e-3
+"""Energy fraction allowed outside the cropped kernel"""
+
+
+@dataclasses.dataclass(frozen=True)
+class Optics:
+    """The imaging optics that scale a wavefront into pixels
+
+    Defaults: green light, F/2.0, 3 um pixels (an Intel RealSense D435 IR
+    imager): lambda N / p = 0.37 px, Airy radius 1.22 lambda N = 0.45 px, and
+    a W_coma = 4 wave comet 8.8 px long.
+    """
+
+    wavelength_um: float = 0.55
+    fnumber: float = 2.0
+    pixel_um: float = 3.0
+
+    @property
+    def lambda_fnum_px(self) -> float:
+        return self.wavelength_um * self.fnumber / self.pixel_um
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self) | {"lambda_fnum_px": self.lambda_fnum_px}
+
+
+def max_slope(seidel: Seidel) -> float:
+    """An upper bound of |grad W| (waves per unit pupil radius) over the pupil"""
+    s = seidel
+    return abs(s.tilt) + 2 * abs(s.focus) + 4 * abs(s.spherical) + 3 * abs(s.coma) + 2 * abs(s.astigmatism)
+
+
+def geometric_radius_px(seidel: Seidel, optics: Optics) -> float:
+    """Largest ray displacement in the image (pixels), plus the Airy radius"""
+    k = optics.lambda_fnum_px
+    return 2 * k * max_slope(seidel) + 1.22 * k
+
+
+def _psf_grid(seidel: Seidel, optics: Optics, supersample: int):
+    """(m, n_sub, N, R): oversampling, sub-pixels across the grid, FFT size, pupil radius"""
+    k = optics.lambda_fnum_px
+    s = int(supersample)
+    m = max(1, math.ceil(2.0 / (s * k)))
+    m += (m + 1) % 2  # odd: a fine bin is centred on the centre sub-pixel
+    fine = m * s  # fine bins per camera pixel; one bin = 1 / fine px
+    r_min = max(24.0, 4.0 * max_slope(seidel))
+    # field of N / fine px must hold the spot (2 radii) with a margin
+    half_px = max(2.0 * geometric_radius_px(seidel, optics), 8 * k, 3.0)
+    n_sub = 2 * math.ceil(max(half_px * s, r_min / (m * k * 2))) + 1
+    N = n_sub * m
+    R = N / (2.0 * fine * k)
+    if R < r_min:  # the pupil needs finer sampling: grow the grid
+        n_sub = 2 * math.ceil(r_min * 2.0 * fine * k / m / 2) + 1
+        N = n_sub * m
+        R = N / (2.0 * fine * k)
+    return m, n_sub, N, R
+
+
+def wavefront_psf(seidel: Seidel, optics: Optics | None = None, supersample: int = 4,
+                  tail: float = DEFAULT_TAIL, max_radius_px: float | None = None) -> np.ndarray:
+    """PSF kernel of a Seidel wavefront at sub-pixel resolution: odd, centred, unit sum
+
+    See the module docstring for the sampling. tail: energy fraction allowed
+    outside the crop (0: keep the whole computed grid); max_radius_px caps
+    the crop (camera pixels).
+    """
+    optics = Optics() if optics is None else optics
+    m, n_sub, N, R = _psf_grid(seidel, optics, supersample)
+    U = pupil_function(seidel, N, R)
+    A = np.fft.fftshift(np.fft.fft2(np.fft.ifftshift(U)))
+    H = (A.real**2 + A.imag**2).reshape(n_sub, m, n_sub, m).sum(axis=(1, 3))
+    H /= H.sum()
+    c = n_sub // 2
+    # smallest centred square with at most `tail` of the energy outside
+    yy, xx = np.mgrid[-c : c + 1, -c : c + 1]
+    ring = np.maximum(abs(xx), abs(yy)).ravel()
+    inside = np.bincount(ring, weights=H.ravel(), minlength=c + 1).cumsum()
+    r = int(np.searchsorted(inside, 1.0 - tail)) if tail > 0 else c
+    r = min(max(r, 1), c)
+    if max_radius_px is not None:
+        r = min(r, max(1, int(round(max_radius_px * supersample))))
+    k = H[c - r : c + r + 1, c - r : c + r + 1]
+    return k / k.sum()
+
+
+def gaussian_psf(sigma_px: float, supersample: int = 4, truncate: float = 4.0) -> np.ndarray:
+    """A Gaussian kernel (sigma in camera pixels) integrated over sub-pixels, unit sum
+
+    SYNOPSIS
+
+        >>> k = gaussian_psf(1.0, 4)
+        >>> k.shape, round(float(k.sum()), 12), round(float(second_moment_px(k, 4)[0, 0]), 3)
+        ((33, 33), 1.0, 1.005)
+
+    The sub-pixel integral (difference of erf) rather than the point samples
+    of simulate.optics.gaussian_kernel; the variance grows by the box's
+    1 / (12 s^2).
+    """
+    from scipy.special import ndtr
+
+    s = int(supersample)
+    r = max(1, math.ceil(truncate * sigma_px * s))
+    e = (np.arange(-r, r + 2) - 0.5) / (s * sigma_px)
+    g = np.diff(ndtr(e))
+    g /= g.sum()
+    return np.outer(g, g)
+
+
+def centroid_px(kernel: np.ndarray, supersample: int) -> np.ndarray:
+    """(x, y) centroid of a kernel relative to its centre, camera pixels"""
+    h, w = kernel.shape
+    y = (np.arange(h) - h // 2) / supersample
+    x = (np.arange(w) - w // 2) / supersample
+    k = kernel / kernel.sum()
+    return np.array((np.sum(k.sum(axis=0) * x), np.sum(k.sum(axis=1) * y)))
+
+
+def second_moment_px(kernel: np.ndarray, supersample: int) -> np.ndarray:
+    """2x2 central second moment of a kernel, camera pixels^2"""
+    h, w = kernel.shape
+    y = (np.arange(h) - h // 2)[:, None] / supersample
+    x = (np.arange(w) - w // 2)[None, :] / supersample
+    k = kernel / kernel.sum()
+    cx, cy = centroid_px(k, supersample)
+    dx, dy = x - cx, y - cy
+    return np.array(((np.sum(k * dx * dx), np.sum(k * dx * dy)), (np.sum(k * dx * dy), np.sum(k * dy * dy))))
+
+
+def asymmetry(kernel: np.ndarray) -> float:
+    """Relative energy of the point-antisymmetric part: 0 for a point-symmetric kernel
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> asymmetry(np.array([[0, 0, 0], [0, 1, 0], [0, 0, 0]])), asymmetry(np.eye(3)[::-1] + np.eye(3))
+        (0.0, 0.0)
+        >>> round(asymmetry(np.array([[0, 0, 0], [0, 1, 1], [0, 0, 0]])), 3)
+        0.5
+
+    |k - k rotated by 180 degrees|_1 / (2 |k|_1).
+    """
+    k = np.asarray(kernel, float)
+    return float(np.abs(k - k[::-1, ::-1]).sum() / (2 * np.abs(k).sum()))
+
+
+class SeidelPSF:
+    """A wavefront PSF for simulate.render_irradiance(psf=...), at any supersampling
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> from rotstar_mrcal.optics import SeidelPSF, Seidel
+        >>> psf = SeidelPSF(Seidel(spherical=1.0))
+        >>> img = np.zeros((1, 81, 81), np.float32); img[0, 40, 40] = 1
+        >>> out = psf(img, (0, 0), 4)
+        >>> round(float(out.sum()), 5), bool(np.allclose(out[0], out[0, ::-1, ::-1], atol=1e-7))
+        (1.0, True)
+    """
+
+    def __init__(self, seidel: Seidel, optics: Optics | None = None, tail: float = DEFAULT_TAIL):
+        self.seidel = seidel
+        self.optics = Optics() if optics is None else optics
+        self.tail = tail
+        self._kernels: dict[int, np.ndarray] = {}
+
+    def kernel(self, s: int) -> np.ndarray:
+        if s not in self._kernels:
+            self._kernels[s] = wavefront_psf(self.seidel, self.optics, s, self.tail)
+        return self._kernels[s]
+
+    def radius_for(self, s: int) -> float:
+        return self.kernel(s).shape[0] // 2 / s
+
+    @property
+    def radius_px(self) -> float:
+        return self.radius_for(4)
+
+    def __call__(self, sub, origin, s):
+        return convolve(sub, self.kernel(s))
+
+    def describe(self):
+        return {"kind": "seidel", "seidel": self.seidel.to_dict(), "optics": self.optics.to_dict()}
+
+
+def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, tile_px: int = 64,
+               field_radius_px: float | None = None, tail: float = DEFAULT_TAIL) -> TiledPSF:
+    """A field-dependent wavefront PSF: coma and astigmatism point along the field radius
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> from rotstar_mrcal.optics import Seidel, radial_psf
+        >>> psf = radial_psf(Seidel(coma=2.0), centre=(64, 64), tile_px=32)
+        >>> out = psf(np.ones((1, 512, 512), np.float32), (0, 0), 4)
+        >>> bool(np.allclose(out, 1, atol=1e-5))          # flat stays flat
+        True
+
+    The tile with centre (x, y) gets `seidel` turned by the azimuth of
+    (x, y) - centre (image direction; so the comet's tail points away from
+    `centre` when seidel.coma > 0). With field_radius_px the Seidel field
+    dependence is applied with h = |(x, y) - centre| / field_radius_px:
+    tilt and coma scale with h, focus and astigmatism with h^2 (field
+    curvature), spherical is constant; without it the amplitudes are constant
+    over the field. Kernels are cached per tile.
+    """
+    optics = Optics() if optics is None else optics
+    cx, cy = (float(v) for v in centre)
+    cache: collections.OrderedDict = collections.OrderedDict()
+
+    def seidel_at(x, y):
+        a = math.atan2(y - cy, x - cx)
+        s = seidel.rotated(a)
+        if field_radius_px:
+            h = math.hypot(x - cx, y - cy) / field_radius_px
+            s = dataclasses.replace(s, tilt=s.tilt * h, coma=s.coma * h, focus=s.focus * h * h,
+                                    astigmatism=s.astigmatism * h * h)
+        return s
+
+    def kernel_at(x, y, s):
+        key = (round(float(x), 3), round(float(y), 3), s)
+        if key not in cache:
+            cache[key] = wavefront_psf(seidel_at(x, y), optics, s, tail)
+            while len(cache) > 256:
+                cache.popitem(last=False)
+        return cache[key]
+
+    worst = seidel if not field_radius_px else dataclasses.replace(
+        seidel, tilt=seidel.tilt * 1.5, coma=seidel.coma * 1.5, focus=seidel.focus * 2.25,
+        astigmatism=seidel.astigmatism * 2.25)
+    return TiledPSF(kernel_at, tile_px=tile_px, radius_px=geometric_radius_px(worst, optics) + 1.0)
