@@ -83,6 +83,7 @@ import argparse
 import concurrent.futures
 import dataclasses
 import datetime
+import importlib.metadata
 import json
 import multiprocessing
 import platform
@@ -672,6 +673,13 @@ def notes(run: dict, have_mrgingham: bool) -> str:
     return "\n".join(out)
 
 
+def package_version(name: str) -> str:
+    try:
+        return importlib.metadata.version(name)
+    except importlib.metadata.PackageNotFoundError:
+        return "?"
+
+
 def machine() -> dict:
     cpu = "?"
     try:
@@ -684,7 +692,7 @@ def machine() -> dict:
         r = subprocess.run(["dpkg-query", "-W", "-f", "${Version}", "mrgingham"], capture_output=True, text=True)
         mg = r.stdout.strip() or None
     return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
-            "opencv": cv2.__version__, "mrcal": getattr(mrcal, "__version__", "?"), "mrgingham": mg,
+            "opencv": cv2.__version__, "mrcal": package_version("mrcal"), "mrgingham": mg,
             "platform": platform.platform()}
 
 
@@ -703,7 +711,7 @@ def plot_cdf(results: dict[str, list[dict]], fn: str) -> None:
     ax.set_xlabel("corner error against truth, px")
     ax.set_ylabel("fraction of the detected corners")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(fontsize=7, loc="upper left")
     ax.set_title("Corner error CDF (correct boards only)", fontsize=10)
     fig.tight_layout()
     fig.savefig(fn, dpi=110)
