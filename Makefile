@@ -19,7 +19,8 @@ BENCH_ARGS ?=
 PYTHON := $(shell for c in python3.13 python3.12 $$(ls -d $$(pyenv root 2>/dev/null)/versions/3.1[2-9]*/bin/python3 2>/dev/null | sort -rV) /usr/bin/python3.13 /usr/bin/python3.12 python3; do \
 	  if "$$c" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 12) else 1)' >/dev/null 2>&1; then command -v "$$c" || echo "$$c"; break; fi; done)
 
-UV := $(shell command -v uv 2>/dev/null || ( [ -x $(CURDIR)/.tools/bin/uv ] && echo $(CURDIR)/.tools/bin/uv ))
+# uv on PATH only if it runs (a pyenv shim named uv can exist for another Python version and fail).
+UV := $(shell if uv --version >/dev/null 2>&1; then command -v uv; elif [ -x $(CURDIR)/.tools/bin/uv ]; then echo $(CURDIR)/.tools/bin/uv; fi)
 ifeq ($(UV),)
 UV := $(CURDIR)/.tools/bin/uv
 endif
