@@ -76,14 +76,6 @@ def _detect_one(seq, pose, frames, layout, opts):
     return pose, p.first_file, r, r.error, size
 
 
-def corner_weights(r) -> np.ndarray:
-    """1/sigma per corner from the refinement covariance, median 1"""
-    s = np.sqrt(np.trace(r.cov, axis1=-2, axis2=-1) / 2) if r.cov is not None else np.ones(r.corners.shape[:2])
-    w = 1 / s
-    med = np.nanmedian(w)
-    return w / med if np.isfinite(med) and med > 0 else np.ones_like(w)
-
-
 def mrcal_command(layout, imagersize, focal, vnl_name, glob) -> str:
     return " ".join([
         "mrcal-calibrate-cameras",
@@ -140,7 +132,7 @@ def main(argv=None) -> int:
             continue  # reported above; mrcal could not parse the row
         if r is not None and r.found:
             boards.append((fn, r.corners))
-            weights.append(corner_weights(r))
+            weights.append(r.weights())
             found.append(r.corners)
             sizes.add(size)
         else:

@@ -68,6 +68,20 @@ class PoseCorners:
     def n_valid(self) -> int:
         return int(np.isfinite(self.corners[..., 0]).sum())
 
+    def weights(self) -> np.ndarray:
+        """(ny, nx) 1/sigma per corner from the refinement covariance, median 1
+
+        sigma is the RMS of the covariance's two principal standard
+        deviations. This is mrcal's weight column (rotstar-detect --weights):
+        relative only, the covariance underestimates the real error (see
+        doc/detector.md). Without a covariance all weights are 1.
+        """
+        if self.cov is None:
+            return np.ones(self.corners.shape[:2])
+        w = 1 / np.sqrt(np.trace(self.cov, axis1=-2, axis2=-1) / 2)
+        med = np.nanmedian(w) if np.isfinite(w).any() else np.nan
+        return w / med if np.isfinite(med) and med > 0 else np.ones_like(w)
+
 
 def _fail(layout: Layout, why: str) -> PoseCorners:
     return PoseCorners(np.full((layout.ny, layout.nx, 2), np.nan), error=why)
