@@ -1,0 +1,32 @@
+"""Calibration with mrcal, and the numbers that say whether it is any good
+
+SYNOPSIS
+
+    >>> import numpy as np
+    >>> from rotstar_mrcal.simulate import preset_model
+    >>> from rotstar_mrcal.validate import heldout, uncertainty
+    >>> model = preset_model("d435")
+    >>> q = uncertainty.imager_grid(model.imagersize(), 8)
+    >>> q.shape
+    (5, 8, 2)
+
+Modules, one concept each:
+
+    calibrate    the mrcal-calibrate-cameras command (lens model, focal seed,
+                 object geometry, image glob) and running it
+    heldout      the paper's metric: poses of a test set solved with the
+                 intrinsics fixed, mean reprojection error
+    uncertainty  mrcal's projection uncertainty on a grid over the imager
+    crossval     mrcal's cross-validation: the projection diff of two
+                 calibrations against the sum of their uncertainties
+    truth        on simulated data: the calibrated model against the true one
+    cornersets   the corner sets of one dataset by each detector (rotstar and
+                 the checkerboard baselines)
+    compare      all of the above for several corner sets of the same poses
+    plots        the figures (matplotlib)
+    report       the Markdown and HTML report, and its headline table
+
+Everything here is a function of arrays, models and file names; the
+command-line tools (rotstar-calibrate, rotstar-crossval, rotstar-report) do
+the printing. See doc/validation.md for what the numbers mean.
+"""

@@ -1,0 +1,148 @@
+"""A corner set on disk: its corners.vnl, the dataset it came from, the imager size, the truth
+
+SYNOPSIS
+
+    from rotstar_mrcal.validate.sources import load_corner_set
+    cs = load_corner_set("seq/corners.vnl")
+    cs.layout.nx, cs.corners.shape, cs.imagersize    # 14, (N, 9, 14, 2), (1280, 800)
+    cs.seq, cs.truth                                 # 'seq', compare.Truth or None
+
+How the pieces are found, in order:
+
+    dataset   the folder two levels above the first image named in the vnl
+              (seq/<pose>/<file>), resolved as mrcal resolves it: as written,
+              else relative to the vnl's folder; it must hold pattern.json
+    layout    `pattern` if given, else <dataset>/pattern.json, else
+              pattern.json next to the vnl
+    imager    `imagersize` if given, else the first image of the vnl that can
+              be read, else the dataset's truth.cameramodel (simulated data)
+    truth     <dataset>/truth.json and truth.cameramodel (rotstar-simulate)
+
+Only boards are kept (images with a `- - -` row are dropped); names are the
+pose folder names (seq/<pose>/<file> -> <pose>).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import cv2
+import numpy as np
+
+from .. import dataset
+from ..pattern.layout import Layout
+from ..vnl import read_corners
+from .calibrate import vnl_has_weights
+from .compare import TestSet, Truth
+
+
+class SourceError(ValueError):
+    """A corner set whose dataset, pattern or imager size cannot be found"""
+
+
+@dataclasses.dataclass
+class CornerSet:
+    vnl: str
+    layout: Layout
+    files: list[str]  # image names as written in the vnl (boards only)
+    corners: np.ndarray  # (N, ny, nx, 2)
+    imagersize: tuple[int, int]
+    weights: bool  # the vnl has a weight column
+    seq: str | None
+    truth: Truth | None
+
+    @property
+    def names(self) -> list[str]:
+        return [pose_name(f) for f in self.files]
+
+    def test_set(self) -> TestSet:
+        return TestSet(self.corners, self.names, self.layout.spacing_m)
+
+
+def pose_name(path: str) -> str:
+    """seq/<pose>/<file> -> <pose>"""
+    return os.path.basename(os.path.dirname(str(path))) or str(path)
+
+
+def resolve_image(name: str, vnl: str) -> str:
+    """An image name from a vnl as mrcal resolves it (as written, else next to the vnl)"""
+    if os.path.isabs(name) or os.path.exists(name):
+        return name
+    return os.path.join(os.path.dirname(os.path.abspath(vnl)), name)
+
+
+def read_vnl_names(vnl: str) -> list[str]:
+    """Image names of a corners.vnl in order of first appearance"""
+    out, seen = [], set()
+    with open(vnl, encoding="ascii") as f:
+        for line in f:
+            s = line.split()
+            if s and not s[0].startswith("#") and s[0] not in seen:
+                seen.add(s[0])
+                out.append(s[0])
+    return out
+
+
+def find_dataset(vnl: str, names=None) -> str | None:
+    names = read_vnl_names(vnl) if names is None else names
+    for n in names[:1]:
+        seq = os.path.dirname(os.path.dirname(resolve_image(n, vnl)))
+        if os.path.exists(os.path.join(seq, "pattern.json")):
+            return seq
+    return None
+
+
+def imager_size(files, vnl: str, seq: str | None) -> tuple[int, int] | None:
+    for f in files[:3]:
+        p = resolve_image(f, vnl)
+        if os.path.exists(p):
+            img = cv2.imread(p, cv2.IMREAD_UNCHANGED)
+            if img is not None:
+                return int(img.shape[1]), int(img.shape[0])
+    if seq and os.path.exists(os.path.join(seq, "truth.cameramodel")):
+        import mrcal
+
+        W, H = mrcal.cameramodel(os.path.join(seq, "truth.cameramodel")).imagersize()
+        return int(W), int(H)
+    return None
+
+
+def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth: bool = True) -> CornerSet:
+    """Read a corners.vnl and find what belongs to it; see the module doc"""
+    if not os.path.exists(vnl):
+        raise SourceError(f"{vnl}: no such file")
+    names = read_vnl_names(vnl)
+    if not names:
+        raise SourceError(f"{vnl}: no images in it")
+    seq = find_dataset(vnl, names)
+    try:
+        if pattern:
+            _, layout = dataset.read_pattern(pattern)
+        elif seq:
+            _, layout = dataset.read_pattern(seq)
+        elif os.path.exists(os.path.join(os.path.dirname(os.path.abspath(vnl)), "pattern.json")):
+            _, layout = dataset.read_pattern(os.path.dirname(os.path.abspath(vnl)))
+        else:
+            raise SourceError(f"{vnl}: cannot find the pattern.json of its dataset (give --pattern)")
+    except dataset.DatasetError as e:
+        raise SourceError(str(e)) from None
+    with open(vnl, encoding="ascii") as f:
+        try:
+            boards = read_corners(f, layout.nx, layout.ny)
+        except ValueError as e:
+            raise SourceError(f"{vnl}: {e} (is pattern.json the pattern of these corners?)") from None
+    files = [n for n in names if boards.get(n) is not None]
+    if not files:
+        raise SourceError(f"{vnl}: no boards in it")
+    corners = np.stack([boards[n] for n in files])
+    size = tuple(int(v) for v in imagersize) if imagersize is not None else imager_size(files, vnl, seq)
+    if size is None:
+        raise SourceError(f"{vnl}: cannot read its images for the imager size (give --imagersize W H)")
+    t = None
+    if truth and seq and os.path.exists(os.path.join(seq, "truth.json")):
+        from ..simulate import load_truth
+
+        tr = load_truth(seq)
+        t = Truth(tr.model, tr.rt_cam_board)
+    return CornerSet(vnl, layout, files, corners, size, vnl_has_weights(vnl), seq, t)

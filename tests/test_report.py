@@ -1,0 +1,64 @@
+"""rotstar-report from a small simulated run of rotstar-crossval (corner-level datasets, real mrcal)"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+
+from test_validate import corner_dataset
+
+from rotstar_mrcal.validate import report
+
+
+def test_report_builds_from_a_small_simulated_run(run_cli, tmp_path):
+    sets = []
+    for name, sigma in (("sharp", 0.03), ("noisy", 0.3)):
+        a = corner_dataset(str(tmp_path / "A"), 10, 1, sigma, noise_seed=11 + len(sets), vnl=f"{name}.vnl")
+        b = corner_dataset(str(tmp_path / "B"), 10, 2, sigma, noise_seed=21 + len(sets), vnl=f"{name}.vnl")
+        sets += ["--set", name, a, b]
+    # a detector that found nothing in group A: reported, not fatal
+    (tmp_path / "A" / "empty.vnl").write_text("# filename x y level\npose000/rotstar_00.png - - -\n")
+    sets += ["--set", "empty", tmp_path / "A" / "empty.vnl", tmp_path / "B" / "noisy.vnl"]
+    x1 = tmp_path / "x1"
+    r = run_cli("rotstar-crossval", *sets, "--lensmodel", "opencv5", "--label", "exposure 1", "--outdir", x1,
+                "--gridn", "24", "--jobs", "2")
+    assert r.returncode == 0, r.stderr
+    assert "empty: " in r.stderr and "| empty | - / - |" in r.stdout and "not calibrated" in r.stdout
+    # a second condition: the same results under another label
+    x2 = tmp_path / "x2"
+    shutil.copytree(x1, x2)
+    res = json.load(open(x2 / "results.json"))
+    res["label"] = "exposure 2"
+    json.dump(res, open(x2 / "results.json", "w"))
+
+    out = tmp_path / "report"
+    r = run_cli("rotstar-report", x1, x2, "--out", out, "--title", "small run")
+    assert r.returncode == 0, r.stderr
+    for f in ("index.md", "index.html", "headline.md", "results.json", "summary-heldout.png", "summary-truth.png"):
+        assert os.path.exists(out / f), f
+    md = (out / "index.md").read_text()
+    assert md.startswith("# small run") and "## exposure 1" in md and "## exposure 2" in md
+    for img in re.findall(r"!\[[^]]*\]\(([^)]+)\)", md) + re.findall(r"src='([^']+)'", (out / "index.html").read_text()):
+        assert os.path.exists(out / img), img  # every figure the pages show is in the folder
+    # the headline on stdout: both methods, the sharp corners win everywhere and say so
+    assert r.stdout == (out / "headline.md").read_text()
+    rows = {line.split("|")[1].strip(): line for line in r.stdout.splitlines() if line.startswith("| ")}
+    assert "**" in rows["sharp"] and "**" not in rows["noisy"] and rows["empty"].count(" - |") == 4
+    assert "Lowest held-out error: sharp in 2 of 2 conditions." in r.stdout
+    # the noisier corners give a larger held-out error, about in proportion
+    m = {e["method"]: e for e in res["methods"]}
+    ratio = m["noisy"]["heldout"]["A->B"]["mean_px"] / m["sharp"]["heldout"]["A->B"]["mean_px"]
+    assert 5 < ratio < 15
+
+
+def test_report_rejects_duplicate_labels(tmp_path):
+    res = {"format": "rotstar-crossval/1", "label": "same", "methods": []}
+    for d in ("a", "b"):
+        os.makedirs(tmp_path / d)
+        json.dump(res, open(tmp_path / d / "results.json", "w"))
+    from rotstar_mrcal.cli.report import main
+
+    assert main([str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "r")]) == 2
+    assert report.headline([res]).rows == []
