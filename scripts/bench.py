@@ -103,6 +103,10 @@ from rotstar_mrcal.detect import baselines
 from rotstar_mrcal.detect.pipeline import detect_pose
 from rotstar_mrcal.pattern.layout import Layout, make_layout
 from rotstar_mrcal.simulate.poses import board_centre_m, tilt_angle
+from rotstar_mrcal.focal import estimate_focal
+from rotstar_mrcal.validate import calibrate as calib
+from rotstar_mrcal.validate.truth import truth_error, truth_poses_of
+from rotstar_mrcal.vnl import write_corners
 
 import mrcal
 
@@ -112,6 +116,7 @@ SQUARE_N = 9  # mrgingham's board: SQUARE_N x SQUARE_N inner corners
 CAPTURES = 8  # checkerboard captures averaged (= rotating-star frames)
 GOAL_RATIO = 0.5
 GOAL_SECONDS = 0.5
+CAL_LENSMODEL = "LENSMODEL_OPENCV8"  # the d435 preset's own lens family
 
 
 def log(msg: str) -> None:
@@ -239,11 +244,12 @@ class Context:
     window: np.ndarray | None = None  # (ny, nx) method 4's half-windows, px
     png: str | None = None  # the 9x9 checkerboard as a PNG, for mrgingham
     window_out: np.ndarray | None = None  # rotstar leaves its refinement windows here
+    weights_out: np.ndarray | None = None  # and its per-corner weights (1/sigma, median 1)
 
 
 def run_rotstar(p: PoseImages, c: Context):
     r = detect_pose(p.rotstar, c.layout, full_scale=c.full_scale)
-    c.window_out = r.window
+    c.window_out, c.weights_out = r.window, (r.weights() if r.found else None)
     return (None, r.error) if r.error else (r.corners, "")
 
 
@@ -528,6 +534,8 @@ def detect_all(scene: Scene, poses: list[PoseImages], tmp: str, have_mrgingham: 
              True: [simulate.true_corners(scene.model, scene.square, rt) for rt in scene.rts_square]}
     pngs = [write_png(tmp, p, full_scale) for p in poses] if have_mrgingham else [None] * len(poses)
     found = {"corners": [None] * len(poses), "window": [None] * len(poses)}  # rotstar's, for method 4
+    labelled = {}  # method -> per pose: corners in the truth's labelling where the board is right, else None
+    rotstar_weights = [None] * len(poses)
 
     def context(m: Method, i: int) -> Context:
         c = Context(scene.square if m.square else scene.layout, full_scale, png=pngs[i])
@@ -549,6 +557,8 @@ def detect_all(scene: Scene, poses: list[PoseImages], tmp: str, have_mrgingham: 
             rows.append(pose_row(i, status, q, truth[m.square][i], why, cpu, wall))
             if m.key == "rotstar" and status != "not found":
                 found["corners"][i], found["window"][i] = q, c.window_out
+                rotstar_weights[i] = c.weights_out
+            labelled.setdefault(m.key, []).append(q if status == "ok" else None)
         results[m.key] = rows
         s = summarize(rows, 1)
         log(f"  {m.name}: {s['complete']}/{s['poses']} complete, {s['mislabelled'] + s['outlier']} wrong, "
@@ -562,7 +572,66 @@ def detect_all(scene: Scene, poses: list[PoseImages], tmp: str, have_mrgingham: 
     good = [i for i in range(len(poses)) if all(results[k][i]["status"] == "ok" for k in results)]
     i = good[0] if good else 0
     memory = measure_memory(poses[i], {k: context(BY_KEY[k], i) for k in results}, tmp)
-    return {"results": results, "memory": memory, "memory_pose": i, "cpu": cpu, "mrgingham_batch_s": batch}
+    return {"results": results, "memory": memory, "memory_pose": i, "cpu": cpu, "mrgingham_batch_s": batch,
+            "labelled": labelled, "rotstar_weights": rotstar_weights}
+
+
+# ---------------------------------------------------------------------------
+# calibration against the true camera
+# ---------------------------------------------------------------------------
+def calibrate_one(boards: list, weights: list | None, layout: Layout, rts: np.ndarray, model: mrcal.cameramodel,
+                  outdir: str) -> dict:
+    """mrcal-calibrate-cameras (CAL_LENSMODEL) on one method's boards; its error against the true camera
+
+    boards: per pose (ny, nx, 2) or None. The calibrated model is compared
+    with the truth over the imager after aligning the solved board poses
+    with the true ones (validate.truth.truth_error, 'procrustes').
+    """
+    use = [i for i, b in enumerate(boards) if b is not None]
+    if len(use) < calib.MIN_BOARDS:
+        return {"boards": len(use), "error": f"{len(use)} boards: too few to calibrate"}
+    os.makedirs(outdir, exist_ok=True)
+    vnl = os.path.join(outdir, "corners.vnl")
+    names = [f"pose{i:03d}/frame.png" for i in use]
+    with open(vnl, "w") as f:
+        write_corners(f, [(n, boards[i]) for n, i in zip(names, use)],
+                      None if weights is None else [weights[i] for i in use])
+    focal = estimate_focal([boards[i] for i in use], layout.board_points()[..., :2], model.imagersize())
+    argv = calib.calibrate_argv(vnl, layout, model.imagersize(), focal, CAL_LENSMODEL, outdir, "*/frame.png",
+                                weights=weights is not None)
+    try:
+        m = calib.run_calibration(argv, in_process=True)
+    except calib.CalibrationError as e:
+        return {"boards": len(use), "error": str(e).splitlines()[0]}
+    e = truth_error(m, model, truth_poses_of(m, {f"pose{i:03d}": rts[i] for i in use}))
+    return {"boards": len(use), "fit_rms_px": calib.calibration_stats(m)["rms_px"], **e.summary()}
+
+
+def calibrate_all(scene: Scene, run: dict, tmp: str) -> dict[str, dict]:
+    """Each method's right boards calibrated with mrcal, against the truth; rotstar also with weights"""
+    out = {}
+    jobs = [(k, k, None) for k in run["labelled"]]
+    if "rotstar" in run["labelled"]:
+        jobs.insert(1, ("rotstar-weighted", "rotstar", run["rotstar_weights"]))
+    for key, src, weights in jobs:
+        square = BY_KEY[src].square
+        layout, rts = (scene.square, scene.rts_square) if square else (scene.layout, scene.rts)
+        log(f"  calibrating {key} ({CAL_LENSMODEL})")
+        out[key] = calibrate_one(run["labelled"][src], weights, layout, rts, scene.model, os.path.join(tmp, key))
+    return out
+
+
+def calibration_table(cal: dict[str, dict]) -> str:
+    names = {**{k: BY_KEY[k].name for k in BY_KEY}, "rotstar-weighted": "rotstar, weighted (--weights)"}
+    lines = ["| corners from | boards | fit RMS px | vs true camera: median px | p95 px | max px |",
+             "|---|---|---|---|---|---|"]
+    for k, c in cal.items():
+        if "error" in c:
+            lines.append(f"| {names[k]} | {c['boards']} | {c['error']} | - | - | - |")
+        else:
+            lines.append(f"| {names[k]} | {c['boards']} | {fmt(c['fit_rms_px'])} | {fmt(c['median_px'])} | "
+                         f"{fmt(c['p95_px'])} | {fmt(c['max_px'])} |")
+    return "\n".join(lines)
 
 
 # ---------------------------------------------------------------------------
@@ -755,6 +824,8 @@ def main(argv=None) -> int:
     t_render = time.perf_counter() - t0
     with tempfile.TemporaryDirectory(prefix="rotstar-bench-") as tmp:
         run = detect_all(scene, poses, tmp, have_mrgingham)
+        log("calibrating with mrcal from each method's boards")
+        cal = calibrate_all(scene, run, tmp)
     results, memory = run["results"], run["memory"]
     sizes = {k: (scene.square if BY_KEY[k].square else scene.layout) for k in results}
     summary = {k: summarize(rows, sizes[k].nx * sizes[k].ny) for k, rows in results.items()}
@@ -764,9 +835,16 @@ def main(argv=None) -> int:
 
     tab = table(summary, memory)
     gl = goal_lines(g)
+    cal_title = (f"Calibration with mrcal ({CAL_LENSMODEL}) from each method's correct boards, against the "
+                 "true camera over the imager (at infinity, board poses aligned with the true ones):")
+    cal_tab = calibration_table(cal)
     print(tab)
     print()
     print(gl)
+    print()
+    print(cal_title)
+    print()
+    print(cal_tab)
     sys.stdout.flush()
 
     os.makedirs(a.out, exist_ok=True)
@@ -778,7 +856,7 @@ def main(argv=None) -> int:
     when = (f"{started:%Y-%m-%d %H:%M %Z}, {mach['cpu']}, {mach['cores']} cores; wall time {wall:.0f} s "
             f"(rendering {t_render:.0f} s with {a.jobs} process(es))")
     md = "\n\n".join([
-        "# rotstar-mrcal benchmark", setup, when, tab, gl,
+        "# rotstar-mrcal benchmark", setup, when, tab, gl, cal_title, cal_tab,
         "Poses a method did not get complete and right:\n\n" + failures(results),
         notes(run, have_mrgingham),
     ]) + "\n"
@@ -801,6 +879,7 @@ def main(argv=None) -> int:
         "methods": {k: {"name": BY_KEY[k].name, "start": BY_KEY[k].start, **summary[k],
                         "memory": memory.get(k), "per_pose": results[k]} for k in results},
         "goals": g,
+        "calibration": {"lensmodel": CAL_LENSMODEL, "methods": cal},
     }
     with open(os.path.join(a.out, "bench.json"), "w") as f:
         json.dump(doc, f, indent=1)
