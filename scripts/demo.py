@@ -350,7 +350,6 @@ def main() -> int:
     p.add_argument("--keep-images", action="store_true", help="also write every frame (16-bit PNG, ~1 GB)")
     a = p.parse_args()
 
-    import mrcal
 
     from rotstar_mrcal import dataset, simulate
 

@@ -56,3 +56,8 @@ def test_lensmodel_names():
 def test_bad_dataset(run_cli, tmp_path):
     r = run_cli("rotstar-calibrate", tmp_path)
     assert r.returncode == 2 and "pattern.json" in r.stderr
+
+
+def test_detection_hint_is_not_repeated(calibrated):
+    r, _ = calibrated  # rotstar-calibrate runs the calibration itself: no "next, calibrate with" advice
+    assert "next, calibrate with" not in r.stderr

@@ -91,3 +91,16 @@ def test_bad_arguments(run_cli, tmp_path):
     assert r.returncode == 2 and "no such file" in r.stderr
     r = run_cli("rotstar-crossval")
     assert r.returncode == 2 and "MODEL TEST" in r.stderr
+
+
+def test_unreadable_models_are_named(run_cli, tmp_path, heldout_run):
+    bad = tmp_path / "bad.cameramodel"
+    bad.write_text("garbage\n")
+    _, out = heldout_run
+    r = run_cli("rotstar-crossval", bad, os.path.join(out, "rotstar", "test.vnl"))
+    assert r.returncode == 2 and f"{bad}: not a camera model mrcal can parse" in r.stderr
+    assert "Traceback" not in r.stderr
+    plain = tmp_path / "plain.cameramodel"  # no optimization_inputs: no uncertainty to compare with
+    mrcal.cameramodel(intrinsics=("LENSMODEL_PINHOLE", [600.0, 600, 640, 400]), imagersize=(1280, 800)).write(str(plain))
+    r = run_cli("rotstar-crossval", plain, plain)
+    assert r.returncode == 2 and "has no optimization_inputs" in r.stderr

@@ -103,7 +103,7 @@ def main(argv=None) -> int:
         vnl = os.path.join(a.outdir, "corners.vnl")
         dargs = [a.seq, "-o", vnl, "--jobs", str(a.jobs), "--refine", a.refine] + (["--weights"] if a.weights else [])
         say("$ " + cal.command_line(["rotstar-detect"] + dargs))
-        rc = detect_main(dargs)
+        rc = detect_main(dargs + ["--no-hint"])
         if rc != 0:
             say("rotstar-calibrate: detection found no board; nothing to calibrate")
             return 1

@@ -147,15 +147,27 @@ def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1) -> 
     return out
 
 
+def load_model(path: str, need_inputs: bool = False):
+    """mrcal.cameramodel(path), or a SourceError naming the file and the reason in one line"""
+    import mrcal
+
+    try:
+        m = mrcal.cameramodel(path)
+    except Exception:  # mrcal raises a plain Exception listing every parser's complaint
+        raise SourceError(f"{path}: not a camera model mrcal can parse") from None
+    if need_inputs and not m.optimization_inputs():
+        raise SourceError(f"{path}: has no optimization_inputs (needed for the uncertainty); "
+                          "use a model written by mrcal-calibrate-cameras")
+    return m
+
+
 # ---------------------------------------------------------------------------
 # modes
 # ---------------------------------------------------------------------------
 def mode_heldout(a, model_path: str, test: str) -> int:
-    import mrcal
-
     from ..validate.heldout import heldout
 
-    model = mrcal.cameramodel(model_path)
+    model = load_model(model_path)
     if _kind(test) == "dataset":
         outdir = a.outdir or "."
         vnl = detect_dataset(test, ["rotstar"], outdir, "test", a.jobs)["rotstar"]
@@ -181,11 +193,10 @@ def mode_heldout(a, model_path: str, test: str) -> int:
 
 def mode_models(a, path_a: str, path_b: str) -> int:
     import matplotlib.pyplot as plt
-    import mrcal
 
     from ..validate.crossval import cross_validate
 
-    ma, mb = mrcal.cameramodel(path_a), mrcal.cameramodel(path_b)
+    ma, mb = load_model(path_a, True), load_model(path_b, True)
     cv = cross_validate(ma, mb, gridn_width=a.gridn, distance=a.distance)
     s = cv.summary()
     if a.outdir:

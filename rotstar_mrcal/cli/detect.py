@@ -8,7 +8,6 @@ import os
 import shlex
 import sys
 
-import numpy as np
 
 from .. import dataset
 from ..detect.pipeline import REFINERS, detect_pose
@@ -57,6 +56,7 @@ def parse_args(argv=None):
                    help="reject a pose whose frames disagree by more than this many pixels "
                         "(the camera moved during the sequence; default 0.15)")
     p.add_argument("--jobs", "-j", type=int, default=1, help="poses processed in parallel (default 1)")
+    p.add_argument("--no-hint", action="store_true", help=argparse.SUPPRESS)  # rotstar-calibrate runs its own
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines (skipped poses are still reported)")
     return p.parse_args(argv)
 
@@ -155,7 +155,8 @@ def main(argv=None) -> int:
     cmd = mrcal_command(layout, imagersize, focal, a.output or "corners.vnl", glob)
     if a.weights:
         cmd = cmd.replace("--corners-cache ", "--corners-cache-has-weights --corners-cache ", 1)
-    say("next, calibrate with:\n  " + cmd)
+    if not a.no_hint:
+        say("next, calibrate with:\n  " + cmd)
     return 0
 
 
