@@ -20,7 +20,8 @@ import pytest
 from conftest import ROLES
 from rotstar_mrcal import dataset as ds
 from rotstar_mrcal.detect.boundaries import element_boundaries
-from rotstar_mrcal.detect.indexing import GridError, adjacency, grid_labels, orient
+from rotstar_mrcal.detect.indexing import (GridError, adjacency, drop_crossing_links, grid_labels, grid_labels_grown,
+                                           grid_symmetries, orient)
 from rotstar_mrcal.detect.pipeline import WINDOW_FRACTION, detect_pose
 from rotstar_mrcal.detect.refine import symmetric_refine
 from rotstar_mrcal.detect.response import binarize, response_map
@@ -160,14 +161,63 @@ def test_grid_labels_match_truth(d435_seq, pose):
     assert np.array_equal(labels, truth_labels)
 
 
-@pytest.mark.xfail(strict=True, raises=GridError, reason=(
-    "indexing.adjacency misses side links across the foreshortened direction at 60 degrees of tilt "
-    "(contact ~5-10 px there, as long as the diagonal contacts it should beat): grid_labels raises "
-    "GridError, the pose is skipped"))
-def test_grid_labels_steep60(d435_seq):
-    el, labels = grid_labelling(load(d435_seq, STEEP60).rotstar, d435_seq.layout)
+def test_grid_labels_steep60_needs_the_grown_labelling(d435_seq):
+    """At 60 degrees (0.45 m) diagonal neighbours touch like side ones: grid_labels gives up,
+    grid_labels_grown on the unpruned graph labels every element right"""
+    frames = load(d435_seq, STEEP60).rotstar
+    mask, el = elements(frames)
+    with pytest.raises(GridError):
+        grid_labels(adjacency(el.contours, mask.shape), d435_seq.layout.nx, d435_seq.layout.ny)
+    L = d435_seq.layout
+    labels = grid_labels_grown(adjacency(el.contours, mask.shape, el.lattice, prune=False), el.centroids, L.nx, L.ny)
+    labels = orient(labels, el.centroids, frames[0], L.nx, L.ny, L.marker)
     truth_labels, _ = match_to_truth(el.centroids, d435_seq.corners(STEEP60))
     assert np.array_equal(labels, truth_labels)
+
+
+def perspective_grid(nx, ny, H):
+    jj, ii = np.mgrid[0:ny, 0:nx]
+    p = np.stack((ii * 10.0, jj * 10.0, np.ones_like(ii, float)), -1).reshape(-1, 3) @ np.asarray(H).T
+    return p[:, :2] / p[:, 2:]
+
+
+def king_graph(nx, ny, diagonals=(1, -1)):
+    jj, ii = np.mgrid[0:ny, 0:nx]
+    ij = np.stack((ii, jj), -1).reshape(-1, 2)
+    d = ij[:, None] - ij[None]
+    A = np.abs(d).sum(-1) == 1
+    for s in diagonals:  # (1, 1)-diagonals for s = 1, (1, -1)-diagonals for s = -1
+        A |= (np.abs(d[..., 0]) == 1) & (d[..., 1] == s * d[..., 0])
+    return A, ij
+
+
+H_STEEP = [[1.0, 0.4, 0], [0.05, 0.35, 0], [0.004, 0.01, 1]]  # strong foreshortening and shear
+
+
+@pytest.mark.parametrize("diagonals", [(), (1,), (-1,), (1, -1)])
+def test_grid_labels_grown_with_any_diagonals(diagonals):
+    nx, ny = 7, 5
+    pts = perspective_grid(nx, ny, H_STEEP)
+    A, ij = king_graph(nx, ny, diagonals)
+    A = drop_crossing_links(A, pts)
+    if diagonals == (1, -1):  # both diagonals of every cell cross: all gone
+        assert np.array_equal(A, king_graph(nx, ny, ())[0])
+    lab = grid_labels_grown(A, pts, nx, ny)
+    # the labelling equals the true one up to a symmetry of the grid
+    assert any(np.array_equal(lab, ij @ g[:, :2].T + g[:, 2]) for g in grid_symmetries(nx, ny))
+
+
+def test_grid_labels_grown_refuses_a_broken_grid():
+    nx, ny = 7, 5
+    pts = perspective_grid(nx, ny, H_STEEP)
+    A, ij = king_graph(nx, ny, (1,))
+    k = np.flatnonzero((ij == (3, 2)).all(1))[0], np.flatnonzero((ij == (4, 2)).all(1))[0]
+    B = A.copy()
+    B[k[0], k[1]] = B[k[1], k[0]] = False  # a missing side link inside
+    with pytest.raises(GridError):
+        grid_labels_grown(B, pts, nx, ny)
+    with pytest.raises(GridError):  # an element missing
+        grid_labels_grown(A[1:, 1:], pts[1:], nx, ny)
 
 
 def rotate_points(p: np.ndarray, k: int, shape: tuple[int, int]) -> np.ndarray:
@@ -311,11 +361,8 @@ def test_steep_poses_are_steep(d435_seq):
     assert np.allclose(tilt, [55, 55, 60], atol=0.01)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "60 degrees of tilt (D435, default layout, 0.45 m): indexing.adjacency misses side links across "
-    "the foreshortened direction, detect_pose skips the pose ('element adjacency has N corner elements "
-    "(expected 4)' / 'boundary chain has 46 elements, expected 42')"))
 def test_detect_pose_steep60(d435_seq):
+    """60 degrees at 0.45 m: the labelling falls back to grid_labels_grown"""
     p = load(d435_seq, STEEP60)
     r = detect_pose(p.rotstar, d435_seq.layout, full_scale=p.full_scale)
     assert r.found, r.error

@@ -15,23 +15,22 @@ SYNOPSIS
 1. (For the paper's outline-based rule, adjacency_quads, each element's
    boundary is reduced to a quadrilateral: the vertices of its minimum-area
    bounding rectangle, each moved to the nearest boundary point.)
-2. Adjacency graph by brute force over all pairs, in the spirit of the
-   paper's rule (elements whose bounding-rectangle vertices are closer than
-   a fraction of a side are neighbours), made robust: the paper's vertex
-   distance separates side from diagonal neighbours by only sqrt(2), which
-   blur (it widens the thresholded bands) and foreshortening undo. Instead,
-   side neighbours face each other across one band with a whole side, so
-   the midpoints of their facing sides are a band apart (0.4 of an element)
-   while a diagonal neighbour is 1.4 elements away; distances are measured
-   in units of each element's extent along the link, which shrinks with the
-   band under foreshortening. Each side of an element faces at most one
-   neighbour, the best-scoring one, linked only when the choice is mutual.
+2. Adjacency graph (`adjacency`): the paper links elements whose
+   bounding-rectangle vertices are close, which separates side from diagonal
+   neighbours by only sqrt(2); blur and foreshortening undo that margin.
+   Instead every lattice pixel goes to the nearest element (a Voronoi
+   partition), side neighbours share a boundary along the band between them,
+   boundary pixels near a band crossing (a third element about as near) do
+   not count, and links that cross another link (both diagonals of one cell)
+   or close a triangle are dropped.
 3. The boundary chain (elements with fewer than four neighbours) must be one
    cycle with four corners (two neighbours each) whose sides have nx and ny
    elements. Labels follow from graph distances to two adjacent corners:
    i + j = d(corner00), (nx-1-i) + j = d(corner10). Every edge of the graph
    must then join labels one step apart; anything else is an error, never a
-   guess.
+   guess. Where that fails because the elements are so small that diagonal
+   neighbours touch like side ones, `grid_labels_grown` labels the unpruned
+   graph cell by cell from the board's outline, with the same refusal rules.
 4. `orient` fixes the labelling among the grid's symmetries with the marker
    element (inverted checker colours in frame 0) and the checker parity, and
    refuses a mirror image.
@@ -96,7 +95,7 @@ def adjacency_quads(quads: np.ndarray, ratio: float = 1.0) -> np.ndarray:
 
 
 def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None = None,
-              min_contact: float = 0.3) -> np.ndarray:
+              min_contact: float = 0.3, prune: bool = True) -> np.ndarray:
     """Boolean (N, N) adjacency of elements by shared border in the band lattice
 
     Every pixel between the elements is given to the nearest element (a
@@ -114,7 +113,8 @@ def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None
     boundary; a grid graph has no triangles, so such links are pruned
     (prune_triangles). Unlike rules on the elements' outlines (such as the paper's vertex
     distance, see adjacency_quads) this holds under shear,
-    steep perspective and blur.
+    steep perspective and blur. prune=False leaves the triangles in (for
+    grid_labels_grown, which copes with diagonal links).
     """
     import scipy.ndimage as ndi
     from scipy.spatial import cKDTree
@@ -159,7 +159,50 @@ def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None
     contact = contact + contact.T
     np.fill_diagonal(contact, 0)
     A = contact > np.maximum(2.0, min_contact * np.minimum(side[:, None], side[None, :]))
-    return prune_triangles(A, contact)
+    centroids = np.array([c.mean(axis=0) for c in contours], float)
+    A = drop_crossing_links(A, centroids)
+    return prune_triangles(A, contact) if prune else A
+
+
+def drop_crossing_links(A: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Drop every link whose segment properly crosses another link's
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+        >>> A = ~np.eye(4, dtype=bool)                 # four sides and both diagonals
+        >>> drop_crossing_links(A, square).astype(int)  # the diagonals cross: gone
+        array([[0, 1, 0, 1],
+               [1, 0, 1, 0],
+               [0, 1, 0, 1],
+               [1, 0, 1, 0]])
+
+    The side links of a grid seen in perspective never cross (a
+    perspective view of a plane keeps segments straight and their order);
+    the two diagonals of one cell do cross each other. Where the elements
+    are so small that diagonal neighbours touch as much as side ones, every
+    cell can carry both diagonals (the king's graph), and pruning triangles
+    alone would then drop the side links, which have more common neighbours.
+    A lone diagonal crosses nothing and is left to prune_triangles.
+    """
+    i, j = np.nonzero(np.triu(A))
+    if len(i) < 2:
+        return A
+    p, q = points[i], points[j]  # (L, 2) segment ends
+
+    def orient(a, b, c):  # sign of the turn a -> b -> c, broadcast over link pairs
+        return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
+                       - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+
+    P, Q = p[:, None], q[:, None]
+    R, S = p[None], q[None]
+    cross = ((orient(P, Q, R) * orient(P, Q, S) < 0) & (orient(R, S, P) * orient(R, S, Q) < 0))
+    shared = (i[:, None] == i[None]) | (i[:, None] == j[None]) | (j[:, None] == i[None]) | (j[:, None] == j[None])
+    bad = (cross & ~shared).any(axis=1)
+    A = A.copy()
+    A[i[bad], j[bad]] = A[j[bad], i[bad]] = False
+    return A
 
 
 def prune_triangles(A: np.ndarray, strength: np.ndarray) -> np.ndarray:
@@ -237,6 +280,87 @@ def grid_labels(A: np.ndarray, nx: int, ny: int) -> np.ndarray:
     e0, e1 = np.nonzero(np.triu(A))
     if np.any(np.abs(lab[e0] - lab[e1]).sum(axis=1) != 1) or len(e0) != nx * (ny - 1) + ny * (nx - 1):
         raise GridError("element adjacency is not that of a grid")
+    return lab
+
+
+def _hull_corners(points: np.ndarray) -> np.ndarray:
+    """Indices of the 4 convex-hull vertices with the sharpest turns, in hull order"""
+    hull = cv2.convexHull(points.astype(np.float32), returnPoints=False).ravel()
+    if len(hull) < 4:
+        raise GridError("the elements do not span a quadrilateral")
+    p = points[hull]
+    a, b = p - np.roll(p, 1, axis=0), np.roll(p, -1, axis=0) - p
+    turn = np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(axis=1)))
+    return hull[np.sort(np.argsort(turn)[-4:])]
+
+
+def _side_chain(points: np.ndarray, a: int, b: int, tol: float) -> np.ndarray:
+    """Elements on the segment from element a to element b (within tol px), ordered from a"""
+    d = points[b] - points[a]
+    L = np.linalg.norm(d)
+    rel = points - points[a]
+    t = rel @ d / L**2
+    off = np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0]) / L
+    on = np.flatnonzero((off < tol) & (t > -0.01) & (t < 1.01))
+    return on[np.argsort(t[on])]
+
+
+def grid_labels_grown(A: np.ndarray, centroids: np.ndarray, nx: int, ny: int) -> np.ndarray:
+    """(N, 2) labels (i, j) grown cell by cell from a corner; tolerates diagonal links
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> jj, ii = np.mgrid[0:3, 0:4]
+        >>> pts = np.stack((ii * 10.0, jj * 6.0), -1).reshape(-1, 2)
+        >>> d = np.abs(pts[:, None] - pts[None]) / (10, 6)
+        >>> king = (d.max(axis=-1) < 1.5) & ~np.eye(12, dtype=bool)   # sides and all diagonals
+        >>> lab = grid_labels_grown(king, pts, 4, 3)
+        >>> np.abs(lab - lab[0]).max(axis=0).tolist()
+        [3, 2]
+
+    For views where the elements are so small that diagonal neighbours
+    touch as much as side ones (steep, distant boards), so that A holds
+    every side link and some or all diagonals and grid_labels fails. The
+    board's outline is found geometrically: its four corners are the
+    sharpest turns of the centroids' convex hull (a perspective view of a
+    rectangle is a convex quadrilateral), its first row and column the
+    elements along two hull sides, which must hold nx and ny elements and be
+    linked in A one after the other. Then each cell is completed: (i+1, j+1)
+    is the one common neighbour of (i+1, j) and (i, j+1) other than (i, j)
+    (true whether or not the cells' diagonals are linked). Anything else
+    raises GridError; the result is checked by `orient` like grid_labels'.
+    """
+    N = len(A)
+    if N != nx * ny:
+        raise GridError(f"found {N} elements, expected {nx}x{ny} = {nx * ny}")
+    c = _hull_corners(centroids)
+    nn = np.sort(np.linalg.norm(centroids[:, None] - centroids[None], axis=-1), axis=1)[:, 1]
+    tol = 0.3 * np.median(nn)
+    chains = [_side_chain(centroids, c[k], c[(k + 1) % 4], tol) for k in range(4)]
+    sizes = [len(ch) for ch in chains]
+    if sizes[0] == nx and sizes[1] == ny and sizes[2] == nx and sizes[3] == ny:
+        row, col = chains[0], chains[3][::-1]
+    elif sizes[0] == ny and sizes[1] == nx and sizes[2] == ny and sizes[3] == nx:
+        row, col = chains[3][::-1], chains[0]
+    else:
+        raise GridError(f"board outline sides hold {sizes} elements, expected {nx} and {ny} alternately")
+    if not (A[row[:-1], row[1:]].all() and A[col[:-1], col[1:]].all()):
+        raise GridError("the elements along the board's outline are not linked one after the other")
+    grid = np.full((ny, nx), -1)
+    grid[0], grid[:, 0] = row, col
+    nbrs = [set(np.flatnonzero(r)) for r in A]
+    taken = set(row) | set(col)
+    for j in range(ny - 1):
+        for i in range(nx - 1):
+            cand = (nbrs[grid[j, i + 1]] & nbrs[grid[j + 1, i]]) - {grid[j, i]} - taken
+            if len(cand) != 1:
+                raise GridError(f"cannot complete grid cell ({i}, {j}): {len(cand)} candidates")
+            grid[j + 1, i + 1] = cand.pop()
+            taken.add(grid[j + 1, i + 1])
+    lab = np.zeros((N, 2), int)
+    jj, ii = np.mgrid[0:ny, 0:nx]
+    lab[grid.ravel(), 0], lab[grid.ravel(), 1] = ii.ravel(), jj.ravel()
     return lab
 
 
