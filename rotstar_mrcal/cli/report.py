@@ -92,21 +92,19 @@ def build(results, dirs, out: str, title: str, notes: str = "", extra_figures=()
             vals[m] = v
         return vals
 
-    fig = plots.summary_bars(labels, [("calibrated on A, tested on B", series("heldout", "A->B")),
-                                      ("calibrated on B, tested on A", series("heldout", "B->A"))],
-                             "held-out mean reprojection error, px")
-    fig.savefig(os.path.join(out, "summary-heldout.png"), dpi=110)
-    plt.close(fig)
-    figures.insert(0, ("Held-out mean reprojection error (the paper's metric) by method and condition",
-                       "summary-heldout.png"))
-    if any(m.get("truth") for r in results for m in r["methods"]):
-        fig = plots.summary_bars(labels, [("calibrated on A", series("truth", "A")),
-                                          ("calibrated on B", series("truth", "B"))],
-                                 "vs true model: median error over the imager, px")
-        fig.savefig(os.path.join(out, "summary-truth.png"), dpi=110)
+    def bars(kind, panels, ylabel, fn, caption, at):
+        fig = plots.summary_bars(labels, [(title, series(kind, key)) for title, key in panels], ylabel)
+        fig.savefig(os.path.join(out, fn), dpi=110)
         plt.close(fig)
-        figures.insert(1, ("Calibrated model against the true camera (simulated data), median over the imager",
-                           "summary-truth.png"))
+        figures.insert(at, (caption, fn))
+
+    bars("heldout", [("calibrated on A, tested on B", "A->B"), ("calibrated on B, tested on A", "B->A")],
+         "held-out mean reprojection error, px", "summary-heldout.png",
+         "Held-out mean reprojection error (the paper's metric) by method and condition", 0)
+    if any(m.get("truth") for r in results for m in r["methods"]):
+        bars("truth", [("calibrated on A", "A"), ("calibrated on B", "B")],
+             "vs true model: median error over the imager, px", "summary-truth.png",
+             "Calibrated model against the true camera (simulated data), median over the imager", 1)
 
     per_condition = {}
     for r, d in zip(results, dirs):
