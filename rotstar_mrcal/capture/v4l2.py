@@ -417,19 +417,23 @@ class Device:
             raise V4L2Error(f"{self.path}: {what}: {e.strerror or e}") from e
         return arg
 
+    def _listed(self, request: int, arg, what: str) -> bool:
+        """ioctl for one entry of a list the driver ends with EINVAL: False past the end"""
+        try:
+            self.sys.ioctl(self.fd, request, arg)
+        except OSError as e:
+            if e.errno == errno.EINVAL:
+                return False
+            raise V4L2Error(f"{self.path}: {what}: {e.strerror or e}") from e
+        return True
+
     def _enum(self, request: int, make, what: str):
         """Call request with index 0, 1, ... until EINVAL"""
         out, i = [], 0
-        while True:
-            arg = make(i)
-            try:
-                self.sys.ioctl(self.fd, request, arg)
-            except OSError as e:
-                if e.errno == errno.EINVAL:
-                    return out
-                raise V4L2Error(f"{self.path}: {what}: {e.strerror or e}") from e
+        while self._listed(request, arg := make(i), what):
             out.append(arg)
             i += 1
+        return out
 
     # ---- what the device is ----------------------------------------------------
     def querycap(self) -> Capability:
@@ -520,13 +524,7 @@ class Device:
         out, cid = [], 0
         while True:
             q = v4l2_queryctrl(id=cid | CTRL_FLAG_NEXT_CTRL)
-            try:
-                self.sys.ioctl(self.fd, VIDIOC_QUERYCTRL, q)
-            except OSError as e:
-                if e.errno == errno.EINVAL:
-                    return out
-                raise V4L2Error(f"{self.path}: VIDIOC_QUERYCTRL: {e.strerror or e}") from e
-            if q.id <= cid:
+            if not self._listed(VIDIOC_QUERYCTRL, q, "VIDIOC_QUERYCTRL") or q.id <= cid:
                 return out
             cid = q.id
             if q.type == CTRL_TYPE_CTRL_CLASS:

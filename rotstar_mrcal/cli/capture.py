@@ -23,7 +23,7 @@ from ..capture.segment import SegmentError, segment, threshold
 from ..capture.source import CaptureError, ControlError, FrameSource, record, skip
 from ..display.loop import player_loop
 from ..display.player import DEFAULT_HOLD
-from .common import say
+from .common import say, size_arg
 from .segment import add_segment_options, options_from
 
 DESCRIPTION = """\
@@ -63,14 +63,6 @@ examples:
 """
 
 
-def _size(s: str) -> tuple[int, int]:
-    try:
-        w, h = s.lower().split("x")
-        return int(w), int(h)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{s!r}: expected WIDTHxHEIGHT") from None
-
-
 def _exposures(s: str) -> list[int]:
     try:
         v = [int(round(float(x))) for x in s.split(",") if x.strip()]
@@ -97,7 +89,7 @@ def parse_args(argv=None):
                                     "libcamera: the camera index or id; replay: the recording")
     g.add_argument("--serial", help="the camera's USB serial number, when several are plugged in")
     g.add_argument("--fourcc", default=DEFAULT_FOURCC.strip(), help="pixel format (default Y16)")
-    g.add_argument("--size", type=_size, default=DEFAULT_SIZE, help="default 1280x800")
+    g.add_argument("--size", type=size_arg, default=DEFAULT_SIZE, help="default 1280x800")
     g.add_argument("--fps", type=float, default=None, help=f"frame rate (default {DEFAULT_FPS:g}; replay: from the recording)")
     g.add_argument("--exposure", type=_exposures, help="microseconds, one dataset each, e.g. 2000,4000,8000 "
                                                        "(default: leave the camera's exposure alone)")

@@ -1,7 +1,8 @@
-"""Helpers shared by the command-line tools: messages on stderr, progress"""
+"""Helpers shared by the command-line tools: messages on stderr, progress, argument types"""
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 
@@ -24,3 +25,12 @@ class Progress:
             eta = el / self.k * (self.n - self.k)
             tail = f"  ({el:.0f} s, ~{eta:.0f} s left)" if self.n > 3 and el > 2 else ""
             say(f"[{self.k}/{self.n}] {label}: {msg}{tail}")
+
+
+def size_arg(s: str) -> tuple[int, int]:
+    """argparse type for WIDTHxHEIGHT, e.g. 2360x1640 -> (2360, 1640)"""
+    try:
+        w, h = s.lower().split("x")
+        return int(w), int(h)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{s!r}: expected WIDTHxHEIGHT, e.g. 2360x1640") from None

@@ -12,7 +12,7 @@ import cv2
 from ..display.player import write_player
 from ..pattern.layout import make_layout
 from ..pattern.render import encode_display, render_frame
-from .common import say
+from .common import say, size_arg
 
 DESCRIPTION = """\
 Write the rotating-star display sequence for one screen: NFRAMES frames in
@@ -29,14 +29,6 @@ a D435-class camera (1280x800, ~90 degrees) at 0.3-0.6 m.
 """
 
 
-def _size(s: str) -> tuple[int, int]:
-    try:
-        w, h = s.lower().split("x")
-        return int(w), int(h)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{s!r}: expected WIDTHxHEIGHT, e.g. 2360x1640") from None
-
-
 def _angle(s: str) -> float:
     t = s.strip().lower().replace(" ", "")
     if t.startswith("pi/"):
@@ -48,7 +40,7 @@ def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-pattern", description=DESCRIPTION,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", "-o", default="pattern", help="output folder (default ./pattern)")
-    p.add_argument("--screen", type=_size, default=(2360, 1640), help="screen size in display pixels (default 2360x1640)")
+    p.add_argument("--screen", type=size_arg, default=(2360, 1640), help="screen size in display pixels (default 2360x1640)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--ppi", type=float, default=264.0, help="display pixels per inch (default 264)")
     g.add_argument("--pixel-pitch-mm", type=float, help="display pixel pitch in millimetres (instead of --ppi)")

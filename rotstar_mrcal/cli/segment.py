@@ -12,7 +12,7 @@ from ..capture.backend_replay import ReplaySource
 from ..capture.pose import quick_check, value_scale, write_segmented
 from ..capture.segment import Options, SegmentError, segment
 from ..capture.source import CaptureError
-from .common import say
+from .common import say, size_arg
 
 DESCRIPTION = """\
 Split a continuous recording of player.html (the start marker, then every
@@ -41,14 +41,6 @@ example:
   rotstar-segment rec/pose000.npy --pattern pattern/pattern.json --out seq/pose000
   rotstar-detect seq/ > corners.vnl
 """
-
-
-def _size(s: str) -> tuple[int, int]:
-    try:
-        w, h = s.lower().split("x")
-        return int(w), int(h)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{s!r}: expected WIDTHxHEIGHT") from None
 
 
 def _scale(s: str):
@@ -93,7 +85,7 @@ def parse_args(argv=None):
     p.add_argument("recording", help="folder of frames, .npy, .raw or video file")
     p.add_argument("--pattern", required=True, help="pattern.json (or the folder holding it) that the player showed")
     p.add_argument("--out", "-o", required=True, help="the pose folder to write, SEQ/<pose>")
-    p.add_argument("--size", type=_size, help="WIDTHxHEIGHT of a .raw recording")
+    p.add_argument("--size", type=size_arg, help="WIDTHxHEIGHT of a .raw recording")
     p.add_argument("--fourcc", help="pixel format of a .raw recording: GREY, Y16 or Y8I")
     p.add_argument("--plot", metavar="PNG", help="also plot the difference signal, the threshold and the stretches")
     p.add_argument("--no-check", action="store_true", help="do not run the quick board detection")
