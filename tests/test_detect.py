@@ -20,8 +20,8 @@ import pytest
 from conftest import ROLES
 from rotstar_mrcal import dataset as ds
 from rotstar_mrcal.detect.boundaries import element_boundaries
-from rotstar_mrcal.detect.indexing import (GridError, adjacency, drop_crossing_links, grid_labels, grid_labels_grown,
-                                           grid_symmetries, orient)
+from rotstar_mrcal.detect.indexing import (GridError, adjacency, contact_graph, drop_crossing_links, grid_labels,
+                                           grid_labels_grown, grid_symmetries, orient)
 from rotstar_mrcal.detect.pipeline import WINDOW_FRACTION, detect_pose
 from rotstar_mrcal.detect.refine import symmetric_refine
 from rotstar_mrcal.detect.response import binarize, response_map
@@ -169,7 +169,7 @@ def test_grid_labels_steep60_needs_the_grown_labelling(d435_seq):
     with pytest.raises(GridError):
         grid_labels(adjacency(el.contours, mask.shape), d435_seq.layout.nx, d435_seq.layout.ny)
     L = d435_seq.layout
-    labels = grid_labels_grown(adjacency(el.contours, mask.shape, el.lattice, prune=False), el.centroids, L.nx, L.ny)
+    labels = grid_labels_grown(contact_graph(el.contours, mask.shape, el.lattice)[0], el.centroids, L.nx, L.ny)
     labels = orient(labels, el.centroids, frames[0], L.nx, L.ny, L.marker)
     truth_labels, _ = match_to_truth(el.centroids, d435_seq.corners(STEEP60))
     assert np.array_equal(labels, truth_labels)

@@ -95,8 +95,14 @@ def adjacency_quads(quads: np.ndarray, ratio: float = 1.0) -> np.ndarray:
 
 
 def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None = None,
-              min_contact: float = 0.3, prune: bool = True) -> np.ndarray:
-    """Boolean (N, N) adjacency of elements by shared border in the band lattice
+              min_contact: float = 0.3) -> np.ndarray:
+    """Boolean (N, N) adjacency of elements by shared border: contact_graph, triangles pruned"""
+    return prune_triangles(*contact_graph(contours, shape, lattice, min_contact))
+
+
+def contact_graph(contours: list, shape: tuple[int, int], lattice: np.ndarray | None = None,
+                  min_contact: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """(A, contact): elements linked by shared border in the band lattice, and the border lengths
 
     Every pixel between the elements is given to the nearest element (a
     Voronoi partition of the border lattice). Side neighbours share a
@@ -110,18 +116,19 @@ def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None
     foreshortening can make the contact across the short direction a
     quarter of that). Under strong shear (steep tilts about a diagonal) the
     two elements on the short diagonal of a band crossing can share a real
-    boundary; a grid graph has no triangles, so such links are pruned
-    (prune_triangles). Unlike rules on the elements' outlines (such as the paper's vertex
-    distance, see adjacency_quads) this holds under shear,
-    steep perspective and blur. prune=False leaves the triangles in (for
-    grid_labels_grown, which copes with diagonal links).
+    boundary; a grid graph has no triangles, so `adjacency` prunes such
+    links (prune_triangles); grid_labels_grown takes A as it is here.
+    Links that cross another link (both diagonals of a cell) are already
+    dropped (drop_crossing_links). Unlike rules on the elements' outlines
+    (such as the paper's vertex distance, see adjacency_quads) this holds
+    under shear, steep perspective and blur.
     """
     import scipy.ndimage as ndi
     from scipy.spatial import cKDTree
 
     N = len(contours)
     if N == 0:
-        return np.zeros((0, 0), bool)
+        return np.zeros((0, 0), bool), np.zeros((0, 0))
     allpts = np.concatenate(contours)
     owner = np.repeat(np.arange(N), [len(c) for c in contours])
     pad = 4
@@ -160,8 +167,7 @@ def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None
     np.fill_diagonal(contact, 0)
     A = contact > np.maximum(2.0, min_contact * np.minimum(side[:, None], side[None, :]))
     centroids = np.array([c.mean(axis=0) for c in contours], float)
-    A = drop_crossing_links(A, centroids)
-    return prune_triangles(A, contact) if prune else A
+    return drop_crossing_links(A, centroids), contact
 
 
 def drop_crossing_links(A: np.ndarray, points: np.ndarray) -> np.ndarray:

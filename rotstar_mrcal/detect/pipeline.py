@@ -39,7 +39,7 @@ import numpy as np
 
 from ..pattern.layout import Layout
 from .boundaries import element_boundaries
-from .indexing import GridError, adjacency, grid_labels, grid_labels_grown, orient
+from .indexing import GridError, contact_graph, grid_labels, grid_labels_grown, orient, prune_triangles
 from .refine import symmetric_refine
 from .response import binarize, response_map
 from .rough import rough_corners
@@ -163,14 +163,13 @@ def detect_pose(
     if large.any():
         q, ok = rough_corners(frames, [c for c, l in zip(contours, large) if l], centroids[large])
         rough[np.flatnonzero(large)[ok]] = q[ok]
-    lattice = el.lattice - (x0, y0)
+    A, contact = contact_graph(contours, frames.shape[1:], el.lattice - (x0, y0))
     try:
         try:
-            labels = grid_labels(adjacency(contours, frames.shape[1:], lattice), layout.nx, layout.ny)
+            labels = grid_labels(prune_triangles(A, contact), layout.nx, layout.ny)
         except GridError as e:  # small elements: diagonal neighbours touch like side ones
             try:
-                labels = grid_labels_grown(adjacency(contours, frames.shape[1:], lattice, prune=False),
-                                           centroids, layout.nx, layout.ny)
+                labels = grid_labels_grown(A, centroids, layout.nx, layout.ny)
             except GridError:
                 raise e from None
         labels = orient(labels, rough, frames[0], layout.nx, layout.ny, layout.marker)
