@@ -102,7 +102,7 @@ from rotstar_mrcal import simulate
 from rotstar_mrcal.detect import baselines
 from rotstar_mrcal.detect.pipeline import detect_pose
 from rotstar_mrcal.pattern.layout import Layout, make_layout
-from rotstar_mrcal.simulate.poses import board_centre_m, tilt_angle
+from rotstar_mrcal.simulate.poses import board_centre_m, centred_pose, tilt_angle
 from rotstar_mrcal.focal import estimate_focal
 from rotstar_mrcal.validate import calibrate as calib
 from rotstar_mrcal.validate.truth import truth_error, truth_poses_of
@@ -136,19 +136,12 @@ class Scene:
     settings: simulate.Settings
 
 
-def square_pose(rt: np.ndarray, layout: Layout, square: Layout) -> np.ndarray:
-    """rt of the square board: same rotation, board centre where layout's centre is"""
-    R = mrcal.R_from_r(rt[:3])
-    t = rt[3:] + R @ (board_centre_m(layout) - board_centre_m(square))
-    return np.concatenate((rt[:3], t))
-
-
 def make_scene(npose: int, seed: int, bits: int) -> Scene:
     model = simulate.preset_model("d435")
     layout = make_layout()
     square = make_layout(nx=SQUARE_N, ny=SQUARE_N)
     rts = simulate.random_poses(model, layout, npose, np.random.default_rng([0, seed]))
-    rts_square = np.array([square_pose(rt, layout, square) for rt in rts])
+    rts_square = centred_pose(rts, layout, square)
     settings = simulate.Settings(blur_px=1.0, noise=0.01, bits=bits, seed=seed)
     return Scene(model, layout, square, rts, rts_square, settings)
 
@@ -263,33 +256,18 @@ def run_classic(p: PoseImages, c: Context):
     return q, "" if q is not None else "no board found"
 
 
-def refine_grouped(refine, image: np.ndarray, start: np.ndarray, window: np.ndarray) -> np.ndarray:
-    """refine(image, points, win) per group of equal integer windows; NaN where it moved > win
-
-    win = floor(window), at least 2, as detect_pose(refine='opencv'|'saddle')
-    does with the median window.
-    """
-    q = np.full(start.shape, np.nan)
-    ok = np.isfinite(start).all(axis=-1) & np.isfinite(window)
-    win = np.where(ok, np.maximum(np.floor(np.nan_to_num(window)), 2), 0).astype(int)
-    for w in np.unique(win[ok]):
-        sel = ok & (win == w)
-        r = refine(image, start[sel], int(w))
-        moved = np.linalg.norm(r - start[sel], axis=-1)
-        q[sel] = np.where((moved <= w)[:, None], r, np.nan)
-    return q
-
-
 def run_subpix(p: PoseImages, c: Context):
     if c.start is None:
         return None, "no start (rotstar found no board)"
-    return refine_grouped(lambda im, x, w: baselines.opencv_subpix(im, x, win=w), p.checker, c.start, c.window), ""
+    return baselines.refine_by_window(lambda im, x, w: baselines.opencv_subpix(im, x, win=w), p.checker,
+                                      c.start, c.window), ""
 
 
 def run_saddle(p: PoseImages, c: Context):
     if c.start is None:
         return None, "no start (rotstar found no board)"
-    return refine_grouped(lambda im, x, w: baselines.saddle_refine(im, x, win=w), p.checker, c.start, c.window), ""
+    return baselines.refine_by_window(lambda im, x, w: baselines.saddle_refine(im, x, win=w), p.checker,
+                                      c.start, c.window), ""
 
 
 MRGINGHAM_ARGS = {"mrgingham": (), "mrgingham-noclahe": ("--noclahe",)}

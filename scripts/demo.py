@@ -128,16 +128,6 @@ def pose_group(model, layout, targets, distance, tilt_axis_deg, roll_deg, tilts=
     return np.array(out)
 
 
-def square_pose(rt, layout, square):
-    """The square board's pose: same rotation, board centre where the rotating-star board's is"""
-    import mrcal
-
-    from rotstar_mrcal.simulate.poses import board_centre_m
-
-    R = mrcal.R_from_r(rt[:3])
-    return np.concatenate((rt[:3], rt[3:] + R @ (board_centre_m(layout) - board_centre_m(square))))
-
-
 def coma_psf(imagersize):
     from rotstar_mrcal.optics import Optics, Seidel, radial_psf
 
@@ -350,8 +340,9 @@ def main() -> int:
     p.add_argument("--keep-images", action="store_true", help="also write every frame (16-bit PNG, ~1 GB)")
     a = p.parse_args()
 
-
     from rotstar_mrcal import dataset, simulate
+    from rotstar_mrcal.pattern.layout import make_layout
+    from rotstar_mrcal.simulate.poses import centred_pose
 
     t0 = time.monotonic()
     out = os.path.abspath(a.out)
@@ -361,14 +352,12 @@ def main() -> int:
     pat = os.path.join(out, "pattern")
     run(["rotstar-pattern", "--out", pat], stdout=subprocess.DEVNULL)
     _, layout = dataset.read_pattern(pat)
-    from rotstar_mrcal.pattern.layout import make_layout
-
     square = make_layout(screen=(layout.screen_width, layout.screen_height), pixel_pitch_m=layout.pixel_pitch_m,
                          pitch=layout.pitch, band=layout.band, nx=SQUARE_N, ny=SQUARE_N)
     model = simulate.preset_model("d435")
     tilts = TILTS[::2] if a.quick else TILTS
     rts = {g: pose_group(model, layout, *spec, tilts=tilts) for g, spec in GROUPS.items()}
-    rts_sq = {g: np.array([square_pose(r, layout, square) for r in v]) for g, v in rts.items()}
+    rts_sq = {g: centred_pose(v, layout, square) for g, v in rts.items()}
     npose = {g: len(v) for g, v in rts.items()}
     c = (np.array(model.imagersize()) - 1) / 2
     reach = {g: float(np.percentile(np.linalg.norm(simulate.true_corners(model, layout, v) - c, axis=-1), 90))

@@ -422,6 +422,39 @@ def saddle_refine(image, corners0, win: int = 5, cone_radius: int | None = None,
     return p.reshape(p0.shape)
 
 
+def refine_by_window(refine, image, start, window) -> np.ndarray:
+    """refine(image, points, win) once per whole-pixel window; NaN where a corner moved beyond its window
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> start = np.array([[10.0, 10.0], [20.0, 20.0], [np.nan, np.nan]])
+        >>> refiner = lambda image, p, win: p + 0.25 * win * (p > 15) * (1, 0)   # a stand-in
+        >>> refine_by_window(refiner, None, start, np.array([3.2, 6.0, 4.0])).tolist()
+        [[10.0, 10.0], [21.5, 20.0], [nan, nan]]
+        >>> refine_by_window(refiner, None, start, np.array([3.2, 1.2, 4.0]))[1]   # win 2, moved 0.5
+        array([20.5, 20. ])
+        >>> refine_by_window(lambda image, p, win: p + 5.0, None, start, np.full(3, 3.0))[:2].tolist()
+        [[nan, nan], [nan, nan]]
+
+    start: (..., 2) points (NaN: none), window: (...) half-window per point
+    (px, as detect_pose's PoseCorners.window). Each point is refined with
+    win = floor(window), at least 2; a result farther than `window` from
+    its start is dropped, as detect_pose(refine='opencv'|'saddle') does.
+    """
+    start = np.asarray(start, float)
+    window = np.asarray(window, float)
+    out = np.full(start.shape, np.nan)
+    ok = np.isfinite(start).all(axis=-1) & np.isfinite(window)
+    win = np.where(ok, np.maximum(np.floor(np.nan_to_num(window)), 2), 0).astype(int)
+    for w in np.unique(win[ok]):
+        sel = ok & (win == w)
+        out[sel] = refine(image, start[sel], int(w))
+    with np.errstate(invalid="ignore"):
+        out[np.linalg.norm(out - start, axis=-1) > window] = np.nan
+    return out
+
+
 # ---------------------------------------------------------------------------
 # mrgingham
 # ---------------------------------------------------------------------------

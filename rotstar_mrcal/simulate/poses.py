@@ -122,6 +122,29 @@ def look_at_pose(
     return np.concatenate((mrcal.r_from_R(R), t))
 
 
+def centred_pose(rt_cam_board, layout: Layout, other: Layout) -> np.ndarray:
+    """rt of board `other` seen like `layout`: same rotation, its centre where layout's is; (..., 6)
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> from rotstar_mrcal.pattern.layout import make_layout
+        >>> a, b = make_layout(), make_layout(nx=9, ny=9)
+        >>> rt = np.array([0.1, -0.2, 0.3, 0.01, 0.02, 0.5])
+        >>> q = centred_pose(rt, a, b)
+        >>> bool(np.allclose(mrcal.transform_point_rt(q, board_centre_m(b)),
+        ...                  mrcal.transform_point_rt(rt, board_centre_m(a))))
+        True
+
+    For comparing boards of different sizes from the same views (the
+    benchmark and the demo show mrgingham, which needs a square grid, the
+    same poses as the rotating-star board).
+    """
+    rt = np.asarray(rt_cam_board, float)
+    shift = mrcal.rotate_point_r(rt[..., :3], board_centre_m(layout) - board_centre_m(other))
+    return np.concatenate((rt[..., :3], rt[..., 3:] + shift), axis=-1)
+
+
 def tilt_angle(rt_cam_board: np.ndarray, layout: Layout) -> np.ndarray:
     """Angle (radians) between board normal and line of sight to the board centre; (..., 6) -> (...)"""
     rt = np.asarray(rt_cam_board, float)

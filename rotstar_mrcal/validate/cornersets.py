@@ -68,17 +68,6 @@ class Found:
     why: str = ""  # why there is no board
 
 
-def _by_window(refine, image, corners, window):
-    """Run refine(image, points, win) once per whole-pixel window size"""
-    out = np.full(corners.shape, np.nan)
-    win = np.floor(np.nan_to_num(window, nan=0)).astype(int)
-    ok = np.isfinite(corners).all(axis=-1) & (win >= 2)
-    for w in np.unique(win[ok]):
-        sel = ok & (win == w)
-        out[sel] = refine(image, corners[sel], int(w))
-    return out
-
-
 def detect_methods(frames, layout, full_scale: float, checkerboard=None, methods=METHODS,
                    window: float = 10.0) -> dict[str, Found]:
     """Every requested method's corners of one pose; see the module doc
@@ -116,10 +105,7 @@ def detect_methods(frames, layout, full_scale: float, checkerboard=None, methods
         if cb is None or ref is None:
             out[name] = Found(None, None, no_cb if cb is None else f"no start (rotstar: {r.error})")
             continue
-        c = _by_window(refine, cb, ref, r.window)
-        bad = np.linalg.norm(c - ref, axis=-1) > np.nan_to_num(r.window, nan=0)
-        c[bad] = np.nan
-        out[name] = Found(c)
+        out[name] = Found(baselines.refine_by_window(refine, cb, ref, r.window))
     return out
 
 
