@@ -291,11 +291,11 @@ def test_shuffled_frames_never_mislabelled(d435_seq, order):
 
 
 def test_frame_zero_fixes_the_orientation(d435_seq):
-    """Frames in order but starting at angle 5 pi/16: the checker phase is inverted everywhere"""
+    """Frames in order but starting at angle 5 pi/16: named as frames out of order, not a missing marker"""
     p = load(d435_seq, "pose006")
     r = detect_pose(p.rotstar[SHUFFLES["rolled-by-5"]], d435_seq.layout, full_scale=p.full_scale)
     assert not r.found
-    assert "orientation" in r.error and "angle 0" in r.error
+    assert r.error.startswith("frames out of order: frame 0 shows the angle of frame"), r.error
 
 
 # ---------------------------------------------------------------------------

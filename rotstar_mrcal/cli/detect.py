@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import concurrent.futures as cf
 import os
 import shlex
 import sys
 
-
 from .. import dataset
-from ..detect.pipeline import REFINERS, detect_pose
+from ..detect.pipeline import REFINERS
+from ..detect.run import detect_dataset
 from ..focal import estimate_focal
-from ..vnl import mrcal_can_read, write_corners
+from ..vnl import write_corners
 from .common import Progress, say
 
 DESCRIPTION = """\
@@ -61,21 +60,6 @@ def parse_args(argv=None):
     return p.parse_args(argv)
 
 
-def _detect_one(seq, pose, frames, layout, opts):
-    """Worker: returns (pose, first file, PoseCorners or None, message, imagersize)"""
-    if not mrcal_can_read(os.path.join(seq, pose)):
-        return pose, None, None, (f"{os.path.join(seq, pose)}: mrcal cannot read file names with whitespace "
-                                  "or non-ASCII characters; rename the folder (left out of the output)"), None
-    try:
-        p = dataset.load_pose(seq, pose, frames)
-    except dataset.DatasetError as e:
-        return pose, None, None, str(e), None
-    r = detect_pose(p.rotstar, layout, full_scale=p.full_scale, checkerboard=p.checkerboard,
-                    window=opts["window"], refine=opts["refine"], max_motion=opts["max_motion"])
-    size = (p.rotstar.shape[2], p.rotstar.shape[1])
-    return pose, p.first_file, r, r.error, size
-
-
 def mrcal_command(layout, imagersize, focal, vnl_name, glob) -> str:
     return " ".join([
         "mrcal-calibrate-cameras",
@@ -91,66 +75,46 @@ def mrcal_command(layout, imagersize, focal, vnl_name, glob) -> str:
 
 def main(argv=None) -> int:
     a = parse_args(argv)
+    progress = None
+
+    def report(r):
+        if r.found:
+            progress.step(r.pose, f"{r.corners.n_valid} of {layout.nx * layout.ny} corners")
+        else:
+            progress.step(r.pose, f"skipped: {r.error}", important=True)
+
     try:
-        pattern, layout = dataset.read_pattern(a.seq)
-        frames = pattern["frames"]
-        poses = dataset.list_poses(a.seq, frames)
+        _, layout = dataset.read_pattern(a.seq)
+        poses = dataset.list_poses(a.seq, _["frames"])
+        if not poses:
+            raise dataset.DatasetError(f"{a.seq}: no pose folders with frames from pattern.json")
+        progress = Progress(len(poses), a.quiet)
+        det = detect_dataset(a.seq, window=a.window, refine=a.refine, max_motion=a.max_motion, jobs=a.jobs,
+                             poses=poses, progress=report)
     except dataset.DatasetError as e:
         say(f"rotstar-detect: {e}")
         return 2
-    if not poses:
-        say(f"rotstar-detect: {a.seq}: no pose folders with frames from pattern.json")
-        return 2
-    opts = dict(window=a.window, refine=a.refine, max_motion=a.max_motion)
-    progress = Progress(len(poses), a.quiet)
-    results = {}
-
-    def report(res):
-        pose, _, r, msg, _ = res
-        results[pose] = res
-        if r is not None and r.found:
-            extra = f", {r.motion_px:.3f} px frame motion" if r.motion_px else ""
-            progress.step(pose, f"{r.n_valid} of {layout.nx * layout.ny} corners{extra}")
-        else:
-            progress.step(pose, f"skipped: {msg}", important=True)
-
-    if a.jobs > 1 and len(poses) > 1:
-        with cf.ProcessPoolExecutor(max_workers=a.jobs) as ex:
-            futs = [ex.submit(_detect_one, a.seq, p, frames, layout, opts) for p in poses]
-            for f in cf.as_completed(futs):
-                report(f.result())
-    else:
-        for p in poses:
-            report(_detect_one(a.seq, p, frames, layout, opts))
-
-    boards, weights, found, sizes = [], [], [], set()
-    first_frame = next(f["file"] for f in frames if f["kind"] == "rotstar")
-    for pose in poses:
-        _, fn, r, msg, size = results[pose]
-        fn = fn or os.path.join(a.seq, pose, first_frame)
-        if not mrcal_can_read(fn):
-            continue  # reported above; mrcal could not parse the row
-        if r is not None and r.found:
-            boards.append((fn, r.corners))
-            weights.append(r.weights())
-            found.append(r.corners)
-            sizes.add(size)
-        else:
-            boards.append((fn, None))
-            weights.append(None)
+    for r in det.rejected:
+        say(f"{r.pose}: skipped: {r.error}")
+    if a.refine == "symmetric":
+        say(f"rotstar-detect: {det.display.summary()}")
+    boards = det.boards()
     out = open(a.output, "w") if a.output else sys.stdout
     try:
-        write_corners(out, boards, weights if a.weights else None)
+        write_corners(out, boards, det.weights() if a.weights else None)
     finally:
         if a.output:
             out.close()
-    say(f"rotstar-detect: {len(found)} of {len(poses)} poses gave a board")
+    found = [r.corners.corners for r in det.found]
+    say(f"rotstar-detect: {len(found)} of {len(det.results)} poses gave a board")
     if not found:
         return 1
+    sizes = det.sizes
     if len(sizes) > 1:
-        say(f"rotstar-detect: warning: poses have different image sizes {sorted(sizes)}")
-    imagersize = sorted(sizes)[0]
+        say(f"rotstar-detect: warning: poses have different image sizes {sizes}")
+    imagersize = sizes[0]
     focal = estimate_focal(found, layout.board_points()[..., :2], imagersize)
+    first_frame = next(f["file"] for f in det.pattern["frames"] if f["kind"] == "rotstar")
     glob = os.path.join(a.seq, "*", first_frame)
     cmd = mrcal_command(layout, imagersize, focal, a.output or "corners.vnl", glob)
     if a.weights:

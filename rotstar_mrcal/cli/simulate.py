@@ -90,6 +90,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     p.add_argument("--max-tilt", type=float, default=60.0, help="largest angle, degrees, between the board normal and the line of sight")
     p.add_argument("--margin", type=float, default=None, help="board-to-image-edge margin in pixels; default 2%% of the width")
+    p.add_argument("--display-offsets", metavar="SPEC", default=None,
+                   help="show each rotating-star frame displaced on the screen, the same in every pose (a "
+                        "player or screen that is not pixel-exact): 'x0,y0,x1,y1,...' display pixels per "
+                        "frame, or 'random:A' for offsets uniform in a disc of radius A (seeded by --seed)")
     p.add_argument("--jobs", type=int, default=1, help="render poses in this many processes (results do not depend on it)")
     p.add_argument("--force", action="store_true", help="write into a folder that already holds a dataset")
     args = p.parse_args(argv)
@@ -106,6 +110,32 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.blur < 0 or args.noise < 0 or args.shot < 0:
         p.error("--blur, --noise and --shot must not be negative")
     return args
+
+
+def display_offsets(spec: str | None, n: int, seed: int) -> np.ndarray | None:
+    """--display-offsets: (n, 2) display pixels, or None
+
+        >>> display_offsets("1,0,0,-1", 2, 0).tolist()
+        [[1.0, 0.0], [0.0, -1.0]]
+        >>> float(np.abs(display_offsets("random:3", 8, 0)).max()) <= 3
+        True
+    """
+    if spec is None:
+        return None
+    try:
+        if spec.startswith("random:"):
+            a = float(spec.split(":", 1)[1])
+            if not (np.isfinite(a) and a >= 0):
+                raise ValueError
+            rng = np.random.default_rng([2, seed])
+            r, t = a * np.sqrt(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n)
+            return np.column_stack((r * np.cos(t), r * np.sin(t)))
+        v = np.array([float(x) for x in spec.split(",")])
+    except ValueError:
+        raise ValueError(f"--display-offsets {spec!r}: expected 'x0,y0,x1,y1,...' or 'random:A'") from None
+    if v.size != 2 * n or not np.isfinite(v).all():
+        raise ValueError(f"--display-offsets {spec!r}: need {2 * n} finite numbers, x and y for each of {n} frames")
+    return v.reshape(n, 2)
 
 
 def load_camera(spec: str) -> tuple[mrcal.cameramodel, str]:
@@ -166,6 +196,7 @@ def main(argv=None) -> int:
             settings,
             frames=frames,
             jobs=args.jobs,
+            display_offsets=display_offsets(args.display_offsets, layout.nframes, args.seed),
             progress=say,
             extra={
                 "camera": camera,

@@ -464,3 +464,79 @@ def orient(labels: np.ndarray, corners: np.ndarray, frame0: np.ndarray, nx: int,
     if np.nanmedian(cross) < 0:
         raise GridError("board seen mirrored (image flipped?): its corner order would be wrong")
     return lab
+
+
+def frame_angle(frame: np.ndarray, grid: np.ndarray, radius: float, n: int = 32) -> float:
+    """Angle of a frame's checker lines on the screen, from the i axis toward j, mod pi/2
+
+    grid: (ny, nx, 2) labelled corners; radius: of the ring sampled around
+    each corner, in grid steps. On a ring about a checker corner whose lines
+    run at phi, the image is a square wave sign(sin 2(alpha - phi)); its second
+    harmonic Z has arg Z = -2 phi - pi/2 (+ pi for inverted colours), so the
+    sum of Z^2 over the elements gives phi mod pi/2 whatever each element's
+    colours. The ring is mapped to the image through the local grid axes, so
+    the angle is the screen's, under any tilt.
+    """
+    ei, ej = axis_vectors(grid)
+    ok = np.isfinite(grid).all(axis=-1) & np.isfinite(ei).all(axis=-1) & np.isfinite(ej).all(axis=-1)
+    c, ei, ej = grid[ok], ei[ok], ej[ok]
+    alpha = (np.arange(n) + 0.5) * 2 * np.pi / n
+    pts = c[:, None] + radius * (np.cos(alpha)[None, :, None] * ei[:, None] + np.sin(alpha)[None, :, None] * ej[:, None])
+    Z = bilinear(frame, pts) @ np.exp(-2j * alpha)
+    W = np.sum(Z**2)
+    return float((-np.angle(W) - np.pi) / 4 % (np.pi / 2))
+
+
+def _angle_diff(a, b):
+    """Distance of angles mod pi/2"""
+    return np.abs((np.asarray(a) - b + np.pi / 4) % (np.pi / 2) - np.pi / 4)
+
+
+def frame_angles(frames: np.ndarray, grid: np.ndarray, half_element_fraction: float) -> np.ndarray:
+    """(nframes,) frame_angle of every frame, the ring inside the element
+
+    half_element_fraction: the element's half-side over the grid step.
+    """
+    return np.array([frame_angle(f, grid, 0.55 * half_element_fraction) for f in frames])
+
+
+def _tolerance(step: float) -> float:
+    return min(abs(step) / 3, np.pi / 24)
+
+
+def order_reason(phi: np.ndarray, step: float) -> str:
+    """'' or which frames are not at their place in the sequence (angles phi from any labelling)
+
+    Before the marker fixes the labelling the grid's axes may be flipped,
+    which turns every angle into its negative: frame k must show k * step
+    for one common sign.
+    """
+    theta = np.arange(len(phi)) * step
+    tol = _tolerance(step)
+    errs = [_angle_diff(sg * phi, theta) for sg in (1, -1)]
+    sg, err = min(zip((1, -1), errs), key=lambda e: np.sum(e[1] > tol))
+    wrong = np.flatnonzero(err > tol)
+    if not len(wrong):
+        return ""
+    k = int(wrong[0])
+    near = np.flatnonzero(_angle_diff(sg * phi[k], theta) < tol)
+    shows = f"the angle of frame {near[0]}" if len(near) else "no angle of the sequence"
+    return (f"frames out of order: frame {k} shows {shows} ({len(wrong)} of {len(phi)} frames off their "
+            "angle); record the sequence in the order of pattern.json")
+
+
+def mirror_reason(phi: np.ndarray, step: float) -> str:
+    """'' or why frames that turn the wrong way under the final labelling make it wrong
+
+    The marker alone cannot catch a mirrored view when pattern.json's marker
+    is mirrored too; the stars' direction of turn (from i toward j) can.
+    """
+    theta = np.arange(len(phi)) * step
+    tol = _tolerance(step)
+    informative = _angle_diff(theta, -theta) > 2 * tol
+    if not informative.any():
+        return ""
+    if np.median(_angle_diff(-phi, theta)[informative]) < np.median(_angle_diff(phi, theta)[informative]):
+        return ("board seen mirrored: the stars turn the wrong way (an image flipped with a pattern.json "
+                "whose marker is mirrored too, or the sequence played backwards); its corner order would be wrong")
+    return ""

@@ -39,10 +39,13 @@ import numpy as np
 
 from ..pattern.layout import Layout
 from .boundaries import element_boundaries
-from .indexing import GridError, contact_graph, grid_labels, grid_labels_grown, orient, prune_triangles
+from .display import FrameShifts, frame_shifts, grid_homography, homography_jacobian
+from .indexing import (GridError, contact_graph, frame_angles, grid_labels, grid_labels_grown, mirror_reason,
+                       order_reason, orient, prune_triangles)
 from .refine import symmetric_refine
 from .response import binarize, response_map
 from .rough import rough_corners
+from .sequence import check_band_parity
 
 REFINERS = ("symmetric", "opencv", "saddle")
 LARGE_ELEMENT = 12.0  # px, inscribed half-size above which the curve intersection starts the refinement
@@ -58,7 +61,8 @@ class PoseCorners:
     sigma: np.ndarray | None = None  # (ny, nx) rms residual of the refinement
     cov: np.ndarray | None = None  # (ny, nx, 2, 2) corner covariance estimate, px^2
     window: np.ndarray | None = None  # (ny, nx) refinement half-window used
-    motion_px: float = 0.0  # largest per-frame disagreement of the corners
+    motion_px: float = 0.0  # frame-to-frame disagreement that display offsets do not explain, px
+    shifts: FrameShifts | None = None  # per-frame display offsets of this pose (symmetric refinement)
 
     @property
     def found(self) -> bool:
@@ -83,6 +87,13 @@ class PoseCorners:
         return w / med if np.isfinite(med) and med > 0 else np.ones_like(w)
 
 
+def _grid(labels: np.ndarray, points: np.ndarray, layout: Layout) -> np.ndarray:
+    """(ny, nx, 2) points placed by their (i, j) labels, NaN elsewhere"""
+    g = np.full((layout.ny, layout.nx, 2), np.nan)
+    g[labels[:, 1], labels[:, 0]] = points
+    return g
+
+
 def _fail(layout: Layout, why: str) -> PoseCorners:
     return PoseCorners(np.full((layout.ny, layout.nx, 2), np.nan), error=why)
 
@@ -99,23 +110,50 @@ def check_exposure(frames: np.ndarray, full_scale: float) -> str:
     return ""
 
 
-def frame_motion(frames: np.ndarray, corners: np.ndarray, window: np.ndarray, ok: np.ndarray,
-                 n_corners: int = 24) -> float:
-    """Median over corners of the largest per-frame corner shift, px
+MIN_SPACING = 12.0  # px between corners below which the elements are not reliably separated
 
-    Each frame alone is point-symmetric about the same corner when the camera
-    held still: refine each frame separately from the joint solution (for
-    n_corners spread over the board) and measure how far the per-frame
-    answers spread.
+
+def element_count_reason(el, n_expected: int, layout: Layout) -> str:
+    """'' when the element boundaries hold the whole grid, else what was seen
+
+    A border lattice that touches the image edge is fine as long as every
+    element is inside (each element is a hole closed by the lattice).
+    """
+    n = len(el.contours)
+    if n == n_expected:
+        return ""
+    if el.lattice is None or not len(el.lattice):
+        return "no rotating-star pattern found (no border lattice that flips between frames)"
+    seen = f"found {n} elements, expected {layout.nx}x{layout.ny} = {n_expected}"
+    if n > 2 * n_expected:
+        return f"{seen}: the response map is dominated by noise (too dark or too noisy?)"
+    if el.touches_edge:
+        return f"board partly out of view ({n} of {n_expected} elements inside the image)"
+    w, h = np.ptp(el.lattice, axis=0)
+    spacing = float(np.sqrt(w * h / n_expected))  # the lattice spans about nx x ny grid steps
+    if spacing < MIN_SPACING:
+        return (f"{seen}: board too small in the image (corners about {spacing:.0f} px apart, need "
+                f"{MIN_SPACING:.0f}); move closer or show a larger pitch")
+    if n < n_expected:
+        return f"{seen}: part of the board is hidden or blurred (an occluder, glare, or too steep a view?)"
+    return f"{seen}: more elements than the grid of pattern.json (is it the pattern.json of this screen?)"
+
+
+def per_frame_corners(frames: np.ndarray, corners: np.ndarray, window: np.ndarray, ok: np.ndarray,
+                      n_corners: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """(indices (n,), corners (nframes, n, 2)): each frame refined alone for n corners spread over the board
+
+    Each frame alone is point-symmetric about its own copy of the corner; the
+    copies agree when neither the camera nor the display moved the frames.
     """
     idx = np.flatnonzero(ok)
-    if len(idx) < 3:
-        return 0.0
-    idx = idx[np.linspace(0, len(idx) - 1, min(n_corners, len(idx))).astype(int)]
+    idx = idx[np.unique(np.linspace(0, len(idx) - 1, min(n_corners, len(idx))).astype(int))] if len(idx) else idx
     per = np.stack([symmetric_refine(f[None], corners[idx], window[idx], max_iter=15, tol=1e-3).corners
-                    for f in frames])  # (nf, n, 2)
-    spread = np.nanmax(np.linalg.norm(per - np.nanmedian(per, axis=0), axis=-1), axis=0)
-    return float(np.nanmedian(spread))
+                    for f in frames])
+    return idx, per
+
+
+SHIFT_MIN_PX = 0.02  # display offsets below this (camera px) are not modelled in the refinement
 
 
 def detect_pose(
@@ -135,20 +173,16 @@ def detect_pose(
     why = check_exposure(frames, full_scale)
     if why:
         return _fail(layout, why)
+    why = check_band_parity(frames)
+    if why:
+        return _fail(layout, why)
     resp = response_map(frames)
     mask, _ = binarize(resp)
     el = element_boundaries(mask)
     n_expected = layout.nx * layout.ny
-    if el.touches_edge and len(el.contours) <= 2 * n_expected:
-        return _fail(layout, f"board partly out of view (the border lattice reaches the image edge; {len(el.contours)} of {n_expected} elements inside)")
-    if len(el.contours) != n_expected:
-        if not el.contours:
-            hint = " (no rotating-star pattern found)"
-        elif len(el.contours) > 2 * n_expected:
-            hint = " (the response map is dominated by noise: too dark or too noisy?)"
-        else:
-            hint = " (camera moved during the sequence? wrong pattern.json?)"
-        return _fail(layout, f"found {len(el.contours)} elements, expected {layout.nx}x{layout.ny} = {n_expected}{hint}")
+    why = element_count_reason(el, n_expected, layout)
+    if why:
+        return _fail(layout, why)
     # work on the board's bounding box from here on (all stages are local)
     H, W = frames.shape[1:]
     m = int(np.ceil(window)) + 4
@@ -172,9 +206,16 @@ def detect_pose(
                 labels = grid_labels_grown(A, centroids, layout.nx, layout.ny)
             except GridError:
                 raise e from None
+        hef = layout.half_element / layout.pitch
+        why = order_reason(frame_angles(frames, _grid(labels, rough, layout), hef), layout.step)
+        if why:
+            return _fail(layout, why)
         labels = orient(labels, rough, frames[0], layout.nx, layout.ny, layout.marker)
     except GridError as e:
         return _fail(layout, str(e))
+    why = mirror_reason(frame_angles(frames, _grid(labels, rough, layout), hef), layout.step)
+    if why:
+        return _fail(layout, why)
 
     w = np.clip(WINDOW_FRACTION * el.inscribed, MIN_WINDOW, window)
     grid_w = np.full((layout.ny, layout.nx), np.nan)
@@ -183,17 +224,28 @@ def detect_pose(
     sigma = np.full((layout.ny, layout.nx), np.nan)
     cov = np.full((layout.ny, layout.nx, 2, 2), np.nan)
     motion = 0.0
+    shifts = None
     if refine == "symmetric":
         res = symmetric_refine(frames, rough, w)
+        if check_motion and res.ok.sum() >= 4:
+            # display offsets: measure each frame's displacement, then refine with it modelled
+            idx, per = per_frame_corners(frames, res.corners, w, res.ok)
+            ok4 = res.ok
+            H = grid_homography(res.corners[ok4], labels[ok4], layout.pitch)
+            jac = homography_jacobian(H, labels * float(layout.pitch))
+            shifts = frame_shifts(per, res.corners[idx], labels[idx], layout.pitch, jac[idx])
+            motion = shifts.residual_px
+            img = shifts.image_shifts(jac)
+            if np.abs(img).max() > SHIFT_MIN_PX:
+                res = symmetric_refine(frames, np.where(res.ok[:, None], res.corners, rough), w, shifts=img)
+            if motion > max_motion:
+                return _fail(layout, f"frames do not align: the camera moved during the sequence "
+                                     f"(the frames turn or scale against each other by {motion:.2f} px, "
+                                     f"limit {max_motion})")
         q, ok = res.corners, res.ok
         reasons[labels[:, 1], labels[:, 0]] = res.reason
         sigma[labels[:, 1], labels[:, 0]] = res.sigma
         cov[labels[:, 1], labels[:, 0]] = res.cov
-        if check_motion:
-            motion = frame_motion(frames, q, w, ok)
-            if motion > max_motion:
-                return _fail(layout, f"frames do not align: the camera moved during the sequence "
-                                     f"(per-frame corners disagree by {motion:.2f} px, limit {max_motion})")
     elif refine in ("opencv", "saddle"):
         if checkerboard is None:
             return _fail(layout, f"--refine {refine} needs the checkerboard frame, which this pose lacks")
@@ -213,4 +265,4 @@ def detect_pose(
 
     corners = np.full((layout.ny, layout.nx, 2), np.nan)
     corners[labels[:, 1], labels[:, 0]] = q + off
-    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion)
+    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts)

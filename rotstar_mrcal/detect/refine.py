@@ -86,10 +86,28 @@ class _Sampler:
         gy = bot - top
         return val, gx, gy
 
+    def shifted(self, p: np.ndarray, shifts: np.ndarray):
+        """As __call__, but frame k is sampled at p + shifts[:, k] (shifts (N, nf, 2))"""
+        out = [np.empty(p.shape[:-1] + (shifts.shape[1],), np.float32) for _ in range(3)]
+        for k in range(shifts.shape[1]):
+            pk = p + shifts[:, None, k, :]
+            F = self.F
+            self.F = F[:, k : k + 1]
+            try:
+                for o, v in zip(out, self(pk)):
+                    o[..., k] = v[..., 0]
+            finally:
+                self.F = F
+        return tuple(out)
 
-def _residuals(sampler, q, d):
-    vp, gxp, gyp = sampler(q[:, None, :] + d)
-    vm, gxm, gym = sampler(q[:, None, :] - d)
+
+def _residuals(sampler, q, d, sh=None):
+    if sh is None:
+        vp, gxp, gyp = sampler(q[:, None, :] + d)
+        vm, gxm, gym = sampler(q[:, None, :] - d)
+    else:
+        vp, gxp, gyp = sampler.shifted(q[:, None, :] + d, sh)
+        vm, gxm, gym = sampler.shifted(q[:, None, :] - d, sh)
     r = (vp - vm).reshape(len(q), -1)
     jx = (gxp - gxm).reshape(len(q), -1)
     jy = (gyp - gym).reshape(len(q), -1)
@@ -114,11 +132,15 @@ def symmetric_refine(
     max_iter: int = 50,
     tol: float = 1e-3,
     seed: int = 0,
+    shifts: np.ndarray | None = None,
 ) -> Refined:
     """Refine corners (N, 2) on frames (nframes, H, W) by Eq. 1; see the module doc
 
     Corners are processed in groups of equal ceil(window), each corner with
-    density * (2 ceil(w) + 1)^2 samples.
+    density * (2 ceil(w) + 1)^2 samples. shifts: optional (nframes, N, 2)
+    image offsets of each frame's copy of each corner (a display that shows
+    frames displaced): frame k is then sampled symmetrically about
+    q + shifts[k], and q is returned.
     """
     frames = np.asarray(frames, np.float32)
     if frames.ndim == 2:
@@ -127,26 +149,38 @@ def symmetric_refine(
     N = len(q0)
     w = np.broadcast_to(np.asarray(window, float), (N,)).copy()
     sampler = _Sampler(frames)
+    sh = None if shifts is None else np.moveaxis(np.asarray(shifts, float).reshape(frames.shape[0], N, 2), 0, 1)
     out = Refined(np.full((N, 2), np.nan), np.zeros(N, bool), np.full(N, "", dtype=object),
                   np.full(N, np.nan), np.full((N, 2, 2), np.nan), 0)
     wc = np.ceil(np.maximum(w, 1)).astype(int)
     for g in np.unique(wc):
         sel = np.flatnonzero(wc == g)
-        r = _refine_group(sampler, frames.shape[0], q0[sel], w[sel], unit_offsets(g, seed, density), max_iter, tol)
+        r = _refine_group(sampler, frames.shape[0], q0[sel], w[sel], unit_offsets(g, seed, density), max_iter, tol,
+                          None if sh is None else sh[sel])
         out.corners[sel], out.ok[sel], out.reason[sel] = r.corners, r.ok, r.reason
         out.sigma[sel], out.cov[sel] = r.sigma, r.cov
         out.iterations = max(out.iterations, r.iterations)
     return out
 
 
-def _refine_group(sampler, nframes, q0, w, u, max_iter, tol) -> Refined:
+def _inside(sampler, q, D, sh):
+    """(N,) True where every sample q + s_k +- d of every frame k lies inside the image"""
+    if sh is None:
+        return sampler.inside(q[:, None, :] + D) & sampler.inside(q[:, None, :] - D)
+    N = len(q)
+    c = q[:, None, None, :] + sh[:, None, :, :]  # (N, 1, nf, 2)
+    return (sampler.inside((c + D[:, :, None, :]).reshape(N, -1, 2))
+            & sampler.inside((c - D[:, :, None, :]).reshape(N, -1, 2)))
+
+
+def _refine_group(sampler, nframes, q0, w, u, max_iter, tol, sh=None) -> Refined:
     N = len(q0)
     D = (w[:, None, None] * u[None]).astype(np.float64)  # (N, S, 2)
 
     q = q0.copy()
     reason = np.full(N, "", dtype=object)
     ok = np.ones(N, bool)
-    bad = ~(sampler.inside(q[:, None, :] + D) & sampler.inside(q[:, None, :] - D)) | ~np.isfinite(q).all(axis=1)
+    bad = ~_inside(sampler, q, D, sh) | ~np.isfinite(q).all(axis=1)
     reason[bad] = "window leaves the image"
     ok &= ~bad
     active = ok.copy()
@@ -155,7 +189,7 @@ def _refine_group(sampler, nframes, q0, w, u, max_iter, tol) -> Refined:
     cost = np.full(N, np.inf)
     idx = np.flatnonzero(active)
     if len(idx):
-        JtJ[idx], Jtr[idx], cost[idx] = _normal(*_residuals(sampler, q[idx], D[idx]))
+        JtJ[idx], Jtr[idx], cost[idx] = _normal(*_residuals(sampler, q[idx], D[idx], None if sh is None else sh[idx]))
     lam = 1e-3 * np.trace(JtJ, axis1=1, axis2=2) + 1e-12
     converged = np.zeros(N, bool)
     it = 0
@@ -166,8 +200,9 @@ def _refine_group(sampler, nframes, q0, w, u, max_iter, tol) -> Refined:
         A = JtJ[idx] + lam[idx, None, None] * np.eye(2)
         step = -np.linalg.solve(A, Jtr[idx][..., None])[..., 0]
         qn = q[idx] + step
-        inside = sampler.inside(qn[:, None, :] + D[idx]) & sampler.inside(qn[:, None, :] - D[idx])
-        r, jx, jy = _residuals(sampler, qn, D[idx])
+        shi = None if sh is None else sh[idx]
+        inside = _inside(sampler, qn, D[idx], shi)
+        r, jx, jy = _residuals(sampler, qn, D[idx], shi)
         JtJn, Jtrn, costn = _normal(r, jx, jy)
         acc = (costn <= cost[idx]) & inside
         a = idx[acc]

@@ -195,6 +195,7 @@ def write_dataset(
     jobs: int = 1,
     progress=None,
     extra: dict | None = None,
+    display_offsets=None,
 ) -> Truth:
     """Render, expose and write every pose; write and return the truth
 
@@ -204,6 +205,10 @@ def write_dataset(
     settings.blur_px (anything render_irradiance takes; must pickle for
     jobs > 1). progress(message) is called once per pose. extra: more entries
     for the truth's settings (e.g. the camera preset name).
+    display_offsets: (n, 2) display pixels by which the screen shows each of
+    the n rotating-star frames displaced (the same in every pose; a player or
+    screen that is not pixel-exact); the truth is the board at their mean,
+    the position the joint refinement measures.
     """
     rts = [np.asarray(r, float) for r in rt_cam_board]
     nfr = len(layout.frames())
@@ -211,6 +216,7 @@ def write_dataset(
         if r.shape not in ((6,), (nfr, 6)):
             raise ValueError(f"a pose must be (6,) or ({nfr}, 6), not {r.shape}")
     names = pose_names(len(rts))
+    shown = [displayed_poses(r, layout, display_offsets) for r in rts]
     frames = exact_frames(layout) if frames is None else np.asarray(frames, np.float32)
     if frames.shape[0] != nfr:
         raise ValueError(f"{frames.shape[0]} screen frames for the layout's {nfr}")
@@ -227,6 +233,7 @@ def write_dataset(
             **dataclasses.asdict(settings),
             "psf": describe_psf(settings.blur_px if psf is None else psf),
             **(extra or {}),
+            **({} if display_offsets is None else {"display_offsets": np.asarray(display_offsets, float).tolist()}),
         },
     )
     write_truth(seq, truth)
@@ -245,17 +252,46 @@ def write_dataset(
     if jobs <= 1:
         _setup(*init)
         try:
-            for i, (n, r) in enumerate(zip(names, rts)):
+            for i, (n, r) in enumerate(zip(names, shown)):
                 report(*_do_pose(seq, i, n, r))
         finally:
             _STATE.clear()
     else:
         ctx = multiprocessing.get_context("spawn")
         with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_setup, initargs=init) as ex:
-            futs = [ex.submit(_do_pose, seq, i, n, r) for i, (n, r) in enumerate(zip(names, rts))]
+            futs = [ex.submit(_do_pose, seq, i, n, r) for i, (n, r) in enumerate(zip(names, shown))]
             for f in concurrent.futures.as_completed(futs):
                 report(*f.result())
     return truth
+
+
+def displayed_poses(rt_cam_board, layout: Layout, display_offsets=None) -> np.ndarray:
+    """The board pose of each frame as displayed: (6,) or (nframes, 6)
+
+    A frame shown displaced by (du, dv) display pixels is the board moved by
+    (du, dv) * pixel_pitch_m in its own plane. Offsets are taken relative to
+    their mean; frames after the rotating-star ones are shown at the mean.
+
+        >>> from rotstar_mrcal.pattern.layout import make_layout
+        >>> layout = make_layout(screen=(800, 600), pitch=100, band=24, pixel_pitch_m=0.001)
+        >>> off = np.zeros((8, 2)); off[1] = (2, 0)
+        >>> rt = displayed_poses(np.zeros(6), layout, off)
+        >>> rt.shape, rt[1, 3:].round(5).tolist(), rt[0, 3:].round(5).tolist()
+        ((9, 6), [0.00175, 0.0, 0.0], [-0.00025, 0.0, 0.0])
+    """
+    rt = np.asarray(rt_cam_board, float)
+    if display_offsets is None:
+        return rt
+    off = np.asarray(display_offsets, float)
+    kinds = [f["kind"] for f in layout.frames()]
+    n = kinds.count("rotstar")
+    if off.shape != (n, 2):
+        raise ValueError(f"display offsets must be ({n}, 2), one per rotating-star frame, not {off.shape}")
+    off = off - off.mean(axis=0)
+    per = np.zeros((len(kinds), 6))
+    per[[k == "rotstar" for k in kinds], 3:5] = off * layout.pixel_pitch_m
+    base = np.broadcast_to(rt, (len(kinds), 6))
+    return mrcal.compose_rt(base, per)
 
 
 # ---- truth.json ---------------------------------------------------------------

@@ -1,0 +1,145 @@
+"""A whole dataset: every pose detected, then the display offsets told from camera motion
+
+SYNOPSIS
+
+    from rotstar_mrcal.detect.run import detect_dataset
+    det = detect_dataset("seq", jobs=2)
+    det.display.summary()            # the screen's per-frame offsets, if any
+    for r in det.results:            # sorted by pose
+        r.pose, r.file, r.found, r.error
+    det.boards()                     # [(file, (ny, nx, 2) or None)] for vnl.write_corners
+
+Poses are detected independently (in worker processes with jobs > 1); the
+display offsets are then estimated over all poses that gave a board
+(detect.display.dataset_offsets) and a pose whose frames moved differently
+from the others is rejected as a camera that moved during the sequence,
+with how far it moved. Nothing here prints: `progress(result)` is called as
+each pose finishes, and the rejections after the dataset check are in
+`det.rejected`.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import os
+
+import numpy as np
+
+from .. import dataset
+from ..pattern.layout import Layout
+from ..vnl import mrcal_can_read
+from .display import DisplayCheck, dataset_offsets
+from .pipeline import PoseCorners, detect_pose
+
+
+@dataclasses.dataclass
+class PoseResult:
+    """One pose of a dataset: its corners or why it gave none"""
+
+    pose: str
+    file: str  # the first rotating-star frame: mrcal's filename column
+    corners: PoseCorners | None
+    error: str = ""  # '' or the one-line reason the pose gave no board
+    size: tuple[int, int] | None = None  # (width, height) of its frames
+
+    @property
+    def found(self) -> bool:
+        return self.corners is not None and not self.error
+
+
+@dataclasses.dataclass
+class DatasetCorners:
+    """Every pose of a dataset, in sorted order, and the display check over them"""
+
+    seq: str
+    layout: Layout
+    pattern: dict
+    results: list[PoseResult]
+    display: DisplayCheck
+    rejected: list[PoseResult]  # found by their pose, then rejected by the dataset's motion check
+
+    @property
+    def found(self) -> list[PoseResult]:
+        return [r for r in self.results if r.found]
+
+    def boards(self) -> list[tuple[str, np.ndarray | None]]:
+        """(file, corners or None) per pose that mrcal can name, for vnl.write_corners"""
+        return [(r.file, r.corners.corners if r.found else None) for r in self.results if mrcal_can_read(r.file)]
+
+    def weights(self) -> list[np.ndarray | None]:
+        return [r.corners.weights() if r.found else None for r in self.results if mrcal_can_read(r.file)]
+
+    @property
+    def sizes(self) -> list[tuple[int, int]]:
+        return sorted({r.size for r in self.found})
+
+
+def detect_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, opts: dict) -> PoseResult:
+    """Load and detect one pose (a worker: picklable arguments, no printing)"""
+    first = next(f["file"] for f in pattern_frames if f["kind"] == "rotstar")
+    fn = os.path.join(seq, pose, first)
+    if not mrcal_can_read(os.path.join(seq, pose)):
+        return PoseResult(pose, fn, None, f"{os.path.join(seq, pose)}: mrcal cannot read file names with "
+                                          "whitespace or non-ASCII characters; rename the folder (left out of the output)")
+    try:
+        p = dataset.load_pose(seq, pose, pattern_frames)
+    except dataset.DatasetError as e:
+        return PoseResult(pose, fn, None, str(e))
+    r = detect_pose(p.rotstar, layout, full_scale=p.full_scale, checkerboard=p.checkerboard, **opts)
+    return PoseResult(pose, p.first_file, r, r.error, (p.rotstar.shape[2], p.rotstar.shape[1]))
+
+
+def _worker_init():
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+def detect_dataset(seq: str, *, window: float = 10.0, refine: str = "symmetric", max_motion: float = 0.15,
+                   jobs: int = 1, poses: list[str] | None = None, progress=None) -> DatasetCorners:
+    """Detect every pose of seq, then check the frames' motion over the dataset; see the module doc
+
+    Raises dataset.DatasetError when the dataset cannot be read at all.
+    """
+    pattern, layout = dataset.read_pattern(seq)
+    frames = pattern["frames"]
+    poses = dataset.list_poses(seq, frames) if poses is None else poses
+    opts = dict(window=window, refine=refine, max_motion=max_motion)
+    done: dict[str, PoseResult] = {}
+
+    def finish(r: PoseResult):
+        done[r.pose] = r
+        if progress:
+            progress(r)
+
+    if jobs > 1 and len(poses) > 1:
+        ex = cf.ProcessPoolExecutor(max_workers=min(jobs, len(poses)), initializer=_worker_init)
+        try:
+            futs = [ex.submit(detect_one, seq, p, frames, layout, opts) for p in poses]
+            for f in cf.as_completed(futs):
+                finish(f.result())
+        except BaseException:
+            for p in list(getattr(ex, "_processes", {}).values()):
+                p.terminate()
+            ex.shutdown(wait=False, cancel_futures=True)
+            raise
+        ex.shutdown()
+    else:
+        for p in poses:
+            finish(detect_one(seq, p, frames, layout, opts))
+
+    results = [done[p] for p in poses]
+    shifts = {r.pose: r.corners.shifts for r in results if r.found and r.corners.shifts is not None}
+    display = dataset_offsets(shifts)
+    rejected = []
+    for r in results:
+        m = display.motion_px.get(r.pose)
+        if not r.found or m is None:
+            continue
+        r.corners.motion_px = m
+        if m > max_motion:
+            r.error = (f"frames do not align: the camera moved during the sequence (its frames moved "
+                       f"{m:.2f} px against each other beyond the screen's own offsets, limit {max_motion})")
+            rejected.append(r)
+    return DatasetCorners(seq, layout, pattern, results, display, rejected)
