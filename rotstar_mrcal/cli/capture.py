@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from .. import dataset
+from ..detect.display import dataset_offsets
 from ..capture import coverage
 from ..capture.backends import BACKENDS, describe_nodes, open_source
 from ..capture.d435 import DEFAULT_FPS, DEFAULT_FOURCC, DEFAULT_SIZE, format_warning
@@ -205,6 +206,7 @@ class Dataset:
     def __init__(self, folder: str, exposure: int | None):
         self.folder, self.exposure = folder, exposure
         self.boards: list[np.ndarray] = []
+        self.shifts: dict = {}  # pose -> FrameShifts, for the display offsets over the session
         self.imagersize = None
         self.scale: float | None = None
         self.tau: float | None = None  # stability threshold of the latest recording (for --auto)
@@ -287,8 +289,14 @@ def process_recording(src, ds: Dataset, pose: str, pattern, layout, frames, seqn
     counts = coverage.coverage_counts(ds.boards, ds.imagersize)
     cv2.imwrite(os.path.join(ds.folder, "coverage.png"), coverage.coverage_image(ds.boards, ds.imagersize))
     state = "complete" if r.n_valid == total else f"{total - r.n_valid} corner(s) missing"
+    if r.shifts is not None:
+        ds.shifts[pose] = r.shifts
+    display = dataset_offsets(ds.shifts)
+    motion = display.motion_px.get(pose, r.motion_px)
+    entry.update(motion_px=motion, display_offsets=None if display.offsets is None else display.offsets.tolist())
     say(f"rotstar-capture: {ds.what(pose)}: board {state} ({r.n_valid}/{total}), frames agree to "
-        f"{r.motion_px:.3f} px; {coverage.describe(counts)}")
+        f"{motion:.3f} px beyond the display's offsets; {coverage.describe(counts)}")
+    say(f"rotstar-capture: {display.summary()}")
     entry.update(ok=True, folder=folder)
     print(folder, flush=True)
     return True
