@@ -110,11 +110,6 @@ def image_shift(a: np.ndarray, b: np.ndarray, smooth: float = 1.5, step: int = 1
     return p[:2] / scale[:2] * max(step, 1)
 
 
-def image_motion(a: np.ndarray, b: np.ndarray, smooth: float = 1.5, step: int = 1) -> float:
-    """|image_shift(a, b)|, pixels"""
-    return float(np.hypot(*image_shift(a, b, smooth, step)))
-
-
 def still_fraction(d: np.ndarray, tau: float) -> float:
     """Fraction of frame-to-frame differences below the stability threshold"""
     v = d[np.isfinite(d)]

@@ -12,10 +12,7 @@ SYNOPSIS
     >>> np.abs(labels - labels[0]).max(axis=0).tolist()
     [3, 2]
 
-1. (For the paper's outline-based rule, adjacency_quads, each element's
-   boundary is reduced to a quadrilateral: the vertices of its minimum-area
-   bounding rectangle, each moved to the nearest boundary point.)
-2. Adjacency graph (`adjacency`): the paper links elements whose
+1. Adjacency graph (`adjacency`): the paper links elements whose
    bounding-rectangle vertices are close, which separates side from diagonal
    neighbours by only sqrt(2); blur and foreshortening undo that margin.
    Instead every lattice pixel goes to the nearest element (a Voronoi
@@ -23,7 +20,7 @@ SYNOPSIS
    boundary pixels near a band crossing (a third element about as near) do
    not count, and links that cross another link (both diagonals of one cell)
    or close a triangle are dropped.
-3. The boundary chain (elements with fewer than four neighbours) must be one
+2. The boundary chain (elements with fewer than four neighbours) must be one
    cycle with four corners (two neighbours each) whose sides have nx and ny
    elements. Labels follow from graph distances to two adjacent corners:
    i + j = d(corner00), (nx-1-i) + j = d(corner10). Every edge of the graph
@@ -31,7 +28,7 @@ SYNOPSIS
    guess. Where that fails because the elements are so small that diagonal
    neighbours touch like side ones, `grid_labels_grown` labels the unpruned
    graph cell by cell from the board's outline, with the same refusal rules.
-4. `orient` fixes the labelling among the grid's symmetries with the marker
+3. `orient` fixes the labelling among the grid's symmetries with the marker
    element (inverted checker colours in frame 0) and the checker parity, and
    refuses a mirror image.
 """
@@ -46,52 +43,6 @@ import numpy as np
 
 class GridError(Exception):
     """The elements do not form the expected grid: the board is skipped"""
-
-
-def element_quads(contours: list) -> np.ndarray:
-    """(N, 4, 2): corners of each element's minimum-area rectangle, snapped to the boundary"""
-    quads = []
-    for c in contours:
-        box = cv2.boxPoints(cv2.minAreaRect(c.astype(np.float32)))
-        d = np.linalg.norm(c[None, :, :] - box[:, None, :], axis=-1)
-        quads.append(c[np.argmin(d, axis=1)].astype(float))
-    return np.array(quads).reshape(-1, 4, 2)
-
-
-def adjacency_quads(quads: np.ndarray, ratio: float = 1.0) -> np.ndarray:
-    """Boolean (N, N) adjacency of elements from their quadrilaterals
-
-    For every pair of elements, the closest pair of side midpoints (one side
-    of each) are the facing sides; their distance relative to each quad's
-    extent along the link (the mean of the two sides that leave the facing
-    side) is the pair's score: about band/element = 0.4 for side neighbours,
-    1.4 or more for diagonal ones, 1.8 for the next element but one, whatever
-    the foreshortening. Each side of an element faces at most one neighbour,
-    the candidate with the lowest score below `ratio`; two elements are linked
-    when each is the other's choice.
-    """
-    N = len(quads)
-    Q = np.asarray(quads, float)
-    nxt = np.roll(Q, -1, axis=1)
-    mid = 0.5 * (Q + nxt)  # (N, 4, 2): side e joins vertices e and e+1
-    length = np.linalg.norm(nxt - Q, axis=-1)  # (N, 4)
-    along = 0.5 * (np.roll(length, 1, axis=1) + np.roll(length, -1, axis=1))  # sides e-1 and e+1
-    d = np.linalg.norm(mid[:, None, :, None, :] - mid[None, :, None, :, :], axis=-1).reshape(N, N, 16)
-    k = np.argmin(d, axis=-1)
-    e, f = k // 4, k % 4
-    dmin = np.take_along_axis(d, k[..., None], -1)[..., 0]
-    extent = np.minimum(np.take_along_axis(along[:, None, :], e[..., None], -1)[..., 0],
-                        np.take_along_axis(along[None, :, :], f[..., None], -1)[..., 0])
-    score = dmin / np.maximum(extent, 1e-9)
-    np.fill_diagonal(score, np.inf)
-    choice = np.zeros((N, N), bool)
-    rows = np.arange(N)
-    for side in range(4):
-        s_e = np.where(e == side, score, np.inf)
-        best = np.argmin(s_e, axis=1)
-        ok = s_e[rows, best] < ratio
-        choice[rows[ok], best[ok]] = True
-    return choice & choice.T
 
 
 def adjacency(contours: list, shape: tuple[int, int], lattice: np.ndarray | None = None,
@@ -120,7 +71,7 @@ def contact_graph(contours: list, shape: tuple[int, int], lattice: np.ndarray | 
     links (prune_triangles); grid_labels_grown takes A as it is here.
     Links that cross another link (both diagonals of a cell) are already
     dropped (drop_crossing_links). Unlike rules on the elements' outlines
-    (such as the paper's vertex distance, see adjacency_quads) this holds
+    (such as the paper's bounding-rectangle vertex distance) this holds
     under shear, steep perspective and blur.
     """
     import scipy.ndimage as ndi

@@ -65,10 +65,3 @@ def view_jacobian(phi, alpha, field=(0.0, 0.0)) -> np.ndarray:
     R = tilt_rotation(phi, alpha)
     f = np.asarray(field, float)
     return R[..., :2, :2] - f[:, None] * R[..., 2:3, :2]
-
-
-def view_grid(phis_deg=PHIS_DEG, alphas_deg=ALPHAS_DEG) -> tuple[np.ndarray, np.ndarray]:
-    """(phi, alpha) in radians for every view, shapes (nphi, nalpha)"""
-    p, a = np.meshgrid(np.radians(phis_deg), np.radians(alphas_deg), indexing="ij")
-    return p, a
-
