@@ -1,7 +1,7 @@
 """Real displays and what the detector sees: display offsets, camera motion, frame order, mirrors, skip reasons
 
 A real screen can show the frames of the sequence a pixel or so apart, the
-same in every pose (../shared/notes/real-captures.md); before this was
+same in every pose (recordings of a monitor, doc/detector.md); before this was
 modelled every such pose was skipped as "the camera moved". The dataset here
 is six poses of the session's D435 dataset (same poses, same noise) rendered
 with per-frame display offsets of up to 3 display pixels, plus one pose whose

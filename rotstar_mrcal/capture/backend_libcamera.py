@@ -17,7 +17,7 @@ Controls go into the capture script at frame 0: ExposureTime (us),
 AeEnable false, AnalogueGain; cam ignores controls a camera lacks, so they
 are not verified (info() says so).
 
-Limits (see /work/shared/notes/capture.md, section 2): libcamera's uvcvideo
+Limits (doc/capture.md, section 9): libcamera's uvcvideo
 pipeline opens only one "default" video node per UVC function and maps
 ExposureTime to the standard 100-us exposure control. On a RealSense D4xx the
 default node of the depth function is very likely the depth (Z16) pin, which

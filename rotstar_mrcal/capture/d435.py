@@ -27,7 +27,7 @@ value range it sees.
 Exposure of the IR imagers is not the V4L2 exposure control (that one is the
 RGB camera's, in 100 us units): it is selector 3 of extension unit 3, in
 microseconds, effective only with selector 0x0B (auto exposure) at 0. Gain is
-the standard V4L2 gain control (16-248). Sources: /work/shared/notes/capture.md.
+the standard V4L2 gain control (16-248). Sources: doc/capture.md, section 9.
 """
 
 from __future__ import annotations

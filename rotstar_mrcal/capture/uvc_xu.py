@@ -19,7 +19,7 @@ depth interface reaches the unit (they share one VideoControl interface).
 Values are little-endian; each selector's size is asked for with
 UVC_GET_LEN first, so a firmware with another size fails loudly instead of
 writing garbage. Unit, GUID and selectors: librealsense src/ds/ds-private.h
-(see /work/shared/notes/capture.md, section 1.4).
+(doc/capture.md, section 9).
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ SYNOPSIS
 A real screen can show the frames of the sequence a pixel or so apart from one
 another (the player, the video decoder or the panel's scaler); the offsets are
 fixed in the screen's frame and repeat in every pose (measured on real
-captures: ../shared/notes/real-captures.md). A camera that moves during a
+captures of a monitor: up to 1.5 camera px, doc/detector.md). A camera that moves during a
 pose moves the frames too, but differently in every pose.
 
 Per pose, each frame is refined alone for a subset of corners; the frame's
