@@ -336,7 +336,8 @@ def grid_symmetries(nx: int, ny: int) -> list[np.ndarray]:
     return g
 
 
-def _grid_array(labels: np.ndarray, values: np.ndarray, nx: int, ny: int) -> np.ndarray:
+def grid_array(labels: np.ndarray, values: np.ndarray, nx: int, ny: int) -> np.ndarray:
+    """(ny, nx, ...) values placed by their (i, j) labels, NaN elsewhere"""
     out = np.full((ny, nx) + values.shape[1:], np.nan)
     out[labels[:, 1], labels[:, 0]] = values
     return out
@@ -395,7 +396,7 @@ def orient(labels: np.ndarray, corners: np.ndarray, frame0: np.ndarray, nx: int,
     fits, scores = [], []
     for g in grid_symmetries(nx, ny):
         lab = (np.column_stack((labels, np.ones(N, int))) @ g.T).astype(int)
-        grid = _grid_array(lab, corners, nx, ny)
+        grid = grid_array(lab, corners, nx, ny)
         s = checker_phase(frame0, grid)
         good = (np.sign(s) == expect) & (np.abs(s) > 0.25)
         score = float(np.mean(good))

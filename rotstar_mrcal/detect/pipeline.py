@@ -12,7 +12,11 @@ SYNOPSIS
     result.error        # '' or the one-line reason the board was skipped
 
 The stages (paper 3.2-3.3): response map -> element boundaries -> rough
-corners -> grid indexing and orientation -> refinement. Each stage is a pure
+corners -> grid indexing and orientation -> refinement, with the checks that
+name what went wrong: exposure, the border bands' colour frame by frame
+(sequence.py: frames out of order), the element count (too small, hidden,
+out of view), the stars' angles (indexing.frame_angles: order, mirror), and
+the per-frame display offsets and motion (display.py). Each stage is a pure
 function in its own module; this one strings them together and turns their
 failures into a reason. A board whose labelling is not certain is never
 returned: it is skipped with the reason.
@@ -40,8 +44,8 @@ import numpy as np
 from ..pattern.layout import Layout
 from .boundaries import element_boundaries
 from .display import FrameShifts, frame_shifts, grid_homography, homography_jacobian
-from .indexing import (GridError, contact_graph, frame_angles, grid_labels, grid_labels_grown, mirror_reason,
-                       order_reason, orient, prune_triangles)
+from .indexing import (GridError, contact_graph, frame_angles, grid_array, grid_labels, grid_labels_grown,
+                       mirror_reason, order_reason, orient, prune_triangles)
 from .refine import symmetric_refine
 from .response import binarize, response_map
 from .rough import rough_corners
@@ -85,13 +89,6 @@ class PoseCorners:
         w = 1 / np.sqrt(np.trace(self.cov, axis1=-2, axis2=-1) / 2)
         med = np.nanmedian(w) if np.isfinite(w).any() else np.nan
         return w / med if np.isfinite(med) and med > 0 else np.ones_like(w)
-
-
-def _grid(labels: np.ndarray, points: np.ndarray, layout: Layout) -> np.ndarray:
-    """(ny, nx, 2) points placed by their (i, j) labels, NaN elsewhere"""
-    g = np.full((layout.ny, layout.nx, 2), np.nan)
-    g[labels[:, 1], labels[:, 0]] = points
-    return g
 
 
 def _fail(layout: Layout, why: str) -> PoseCorners:
@@ -207,13 +204,13 @@ def detect_pose(
             except GridError:
                 raise e from None
         hef = layout.half_element / layout.pitch
-        why = order_reason(frame_angles(frames, _grid(labels, rough, layout), hef), layout.step)
+        why = order_reason(frame_angles(frames, grid_array(labels, rough, layout.nx, layout.ny), hef), layout.step)
         if why:
             return _fail(layout, why)
         labels = orient(labels, rough, frames[0], layout.nx, layout.ny, layout.marker)
     except GridError as e:
         return _fail(layout, str(e))
-    why = mirror_reason(frame_angles(frames, _grid(labels, rough, layout), hef), layout.step)
+    why = mirror_reason(frame_angles(frames, grid_array(labels, rough, layout.nx, layout.ny), hef), layout.step)
     if why:
         return _fail(layout, why)
 
