@@ -100,15 +100,15 @@ def check_exposure(frames: np.ndarray, full_scale: float) -> str:
     (robust sigma of neighbouring-pixel differences) and MIN_LEVELS grey levels.
     """
     sub = frames[:, ::4, ::4]
+    sat = float(np.mean(sub >= full_scale))
+    if sat > 0.5:
+        return f"saturated ({sat:.0%} of the pixels at full scale)"
     lo, hi = (float(v) for v in np.percentile(sub, [0.5, 99.5]))
     d = np.diff(frames[:2, ::8, :], axis=-1)
     noise = max(float(np.median(np.abs(d - np.median(d)))) * 1.4826 / np.sqrt(2), 0.3)  # >= quantisation
     if hi - lo < max(MIN_CONTRAST_NOISE * noise, MIN_LEVELS):
-        return (f"all dark: no contrast above the noise (0.5-99.5th percentiles {lo:.0f}-{hi:.0f} of "
+        return (f"all dark (no contrast above the noise: 0.5-99.5th percentiles {lo:.0f}-{hi:.0f} of "
                 f"{full_scale:.0f}, noise {noise:.1f})")
-    sat = float(np.mean(sub >= full_scale))
-    if sat > 0.5:
-        return f"saturated ({sat:.0%} of the pixels at full scale)"
     return ""
 
 
