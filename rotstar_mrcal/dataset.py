@@ -62,11 +62,16 @@ class Pose:
         return self.files[0]
 
 
+def pattern_file(path: str) -> str:
+    """The pattern.json of a dataset folder, or path itself"""
+    return os.path.join(path, "pattern.json") if os.path.isdir(path) else path
+
+
 def read_pattern(path: str) -> tuple[dict, Layout]:
     """Read pattern.json from a dataset folder (or the file itself)"""
     if not os.path.exists(path):
         raise DatasetError(f"{path}: no such {'file' if path.endswith('.json') else 'folder'}")
-    fn = os.path.join(path, "pattern.json") if os.path.isdir(path) else path
+    fn = pattern_file(path)
     if not os.path.exists(fn):
         raise DatasetError(f"{fn}: no pattern.json (copy the one rotstar-pattern wrote into the dataset folder)")
     _check_regular(fn)

@@ -83,9 +83,7 @@ class ReplaySource(FrameSource):
         self.t_ns = None
         self._video = None
         meta_fps = 0.0
-        if not os.path.exists(path):
-            raise CaptureError(f"{path}: cannot read (no such file or folder)")
-        if not (os.path.isdir(path) or os.path.isfile(path)):
+        if os.path.exists(path) and not (os.path.isdir(path) or os.path.isfile(path)):
             raise CaptureError(f"{path}: not a regular file or folder")
         if os.path.isdir(path):
             files = sorted((f for f in os.listdir(path) if f.lower().endswith(IMAGE_EXTENSIONS)), key=natural_key)

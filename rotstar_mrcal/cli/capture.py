@@ -310,7 +310,7 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
         pattern, layout = dataset.read_pattern(a.pattern)
     except dataset.DatasetError as e:
         fail(str(e))
-    check_output_path(a.out, [a.pattern], folder=True)
+    check_output_path(a.out, [dataset.pattern_file(a.pattern)], folder=True)
     n_entries = len(player_loop(pattern["frames"]))
     warn = format_warning(a.fourcc) if a.camera == "d435" and a.backend != "replay" else None
     if warn:

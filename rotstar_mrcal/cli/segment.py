@@ -130,7 +130,7 @@ def _main(argv=None) -> int:
         fail(str(e))
     out = os.path.normpath(a.out)
     seq, pose = os.path.dirname(out) or ".", os.path.basename(out)
-    inputs = [a.recording, a.pattern]
+    inputs = [a.recording, dataset.pattern_file(a.pattern)]
     check_output_path(out, inputs, folder=True)
     if a.plot:
         check_output_path(a.plot, inputs)
