@@ -9,6 +9,7 @@ import os
 import secrets
 import signal
 import sys
+import threading
 import time
 from typing import NoReturn
 
@@ -113,7 +114,8 @@ def run(prog: str, main_fn, argv=None) -> int:
         rotstar-x: seq/pattern.json: grid.nx is 0
         2
     """
-    old = signal.signal(signal.SIGTERM, _on_sigterm)
+    main_thread = threading.current_thread() is threading.main_thread()  # (signal handlers live there)
+    old = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
     try:
         return main_fn(argv)
     except Failure as e:
@@ -123,7 +125,8 @@ def run(prog: str, main_fn, argv=None) -> int:
         say(f"{prog}: interrupted")
         return EXIT_INTERRUPTED
     finally:
-        signal.signal(signal.SIGTERM, old)
+        if main_thread:
+            signal.signal(signal.SIGTERM, old)
 
 
 def _worker_init() -> None:
