@@ -34,6 +34,7 @@ import contextlib
 import dataclasses
 import json
 import os
+import stat
 
 import cv2
 import numpy as np
@@ -61,11 +62,19 @@ class Pose:
         return self.files[0]
 
 
+def pattern_file(path: str) -> str:
+    """The pattern.json of a dataset folder, or path itself"""
+    return os.path.join(path, "pattern.json") if os.path.isdir(path) else path
+
+
 def read_pattern(path: str) -> tuple[dict, Layout]:
     """Read pattern.json from a dataset folder (or the file itself)"""
-    fn = os.path.join(path, "pattern.json") if os.path.isdir(path) else path
+    if not os.path.exists(path):
+        raise DatasetError(f"{path}: no such {'file' if path.endswith('.json') else 'folder'}")
+    fn = pattern_file(path)
     if not os.path.exists(fn):
         raise DatasetError(f"{fn}: no pattern.json (copy the one rotstar-pattern wrote into the dataset folder)")
+    _check_regular(fn)
     try:
         with open(fn) as f:
             d = json.load(f)
@@ -75,6 +84,17 @@ def read_pattern(path: str) -> tuple[dict, Layout]:
         return d, layout_from_dict(d)
     except ValueError as e:
         raise DatasetError(f"{fn}: {e}") from None
+
+
+def _check_regular(fn: str) -> None:
+    """DatasetError unless fn is a regular file (a FIFO or a device would block the reader)"""
+    try:
+        mode = os.stat(fn).st_mode
+    except OSError as e:
+        raise DatasetError(f"{fn}: {e.strerror}") from None
+    if not stat.S_ISREG(mode):
+        what = "a folder" if stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode) else "a special file"
+        raise DatasetError(f"{fn}: {what}, not a regular file")
 
 
 def write_pattern(seq: str, layout: Layout) -> str:
@@ -101,6 +121,33 @@ def list_poses(seq: str, frames: list[dict] | None = None) -> list[str]:
     ]
 
 
+IMAGE_EXTENSIONS = (".png", ".pgm", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
+
+
+def unmatched_folders(seq: str, frames: list[dict]) -> dict[str, str]:
+    """{folder name: why it is not a pose} for the sub-folders that hold images, none named as in pattern.json
+
+    These are pose folders whose frames were renamed (frame_00.png ...) or a
+    different pattern's recording: list_poses leaves them out, the tools say so.
+    """
+    names = [f["file"] for f in frames]
+    out = {}
+    for e in sorted(os.listdir(seq)):
+        folder = os.path.join(seq, e)
+        if not os.path.isdir(folder) or e.startswith("."):
+            continue
+        try:
+            files = sorted(os.listdir(folder))
+        except OSError:
+            continue
+        images = [f for f in files if f.lower().endswith(IMAGE_EXTENSIONS)]
+        if images and not set(names) & set(files):
+            more = f" and {len(images) - 2} more" if len(images) > 2 else ""
+            out[e] = (f"{folder}: no frame named as in pattern.json ({names[0]} ... {names[-1]} missing); "
+                      f"holds {', '.join(images[:2])}{more}")
+    return out
+
+
 @contextlib.contextmanager
 def _quiet_stderr():
     """Silence the C-level stderr (file descriptor 2) for the duration"""
@@ -122,6 +169,7 @@ def read_image(fn: str) -> tuple[np.ndarray, float]:
     """A grayscale 8- or 16-bit PNG as float32, and its full scale"""
     if not os.path.exists(fn):
         raise DatasetError(f"{fn}: missing frame")
+    _check_regular(fn)
     with _quiet_stderr():  # libpng prints its own error lines; ours is the one that counts
         img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
     if img is None:

@@ -213,10 +213,10 @@ def test_capture_interactive_and_failures(loop_frames, pattern_dir, tmp_path, ca
                          "--exposure", "4000"])
     code, out, err = run_capture(["--backend", "replay", "--device", tmp_path / "missing.npy", "--pattern",
                                   pattern_dir, "--out", tmp_path / "c"], capsys)
-    assert code == 3 and "cannot read" in err
+    assert code == 1 and "cannot read" in err
     code, out, err = run_capture(["--backend", "replay", "--device", tmp_path / "still.npy", "--pattern",
                                   tmp_path / "nothing", "--out", tmp_path / "c"], capsys)
-    assert code == 2 and "no pattern.json" in err
+    assert code == 2 and "nothing: no such folder" in err
 
 
 def test_segment_cli_on_a_folder_of_8bit_frames(loop_frames, pattern_dir, tmp_path, capsys):

@@ -591,7 +591,7 @@ def test_capture_cli_stops_when_a_control_fails(player_loop_frames, tmp_path, ca
     monkeypatch.setattr(sys, "stdin", io.StringIO("\n"))
     code = rotstar_capture(argv, source=V4L2Source("/dev/video2", size=(640, 400), sys=fake))
     err = capsys.readouterr().err
-    assert code == 3 and "exposure 3000 us: exposure 3000 us (XU unit 3 selector 3)" in err and "--force" in err
+    assert code == 1 and "exposure 3000 us: exposure 3000 us (XU unit 3 selector 3)" in err and "--force" in err
     assert fake.fds == {}
     monkeypatch.setattr(sys, "stdin", io.StringIO("\nq\n"))
     code = rotstar_capture(argv + ["--force"], source=V4L2Source("/dev/video2", size=(640, 400), sys=fake))

@@ -388,7 +388,10 @@ def test_detect_pose_with_more_noise(d435_seq, noise):
 def test_detect_pose_bad_exposure_says_why(d435_seq):
     p = load(d435_seq, "pose003")
     fs = p.full_scale
-    dark = detect_pose(p.rotstar * 0.01, d435_seq.layout, full_scale=fs)
+    # dark: black level, read noise, a few DN of signal (p.rotstar * 0.01 scales the noise too: that is
+    # a well exposed image in fewer bits, as 10-bit data in a 16-bit PNG, and is detected)
+    in_the_dark = 200 + p.rotstar * 0.0005 + np.random.default_rng(0).normal(0, 30, p.rotstar.shape)
+    dark = detect_pose(in_the_dark, d435_seq.layout, full_scale=fs)
     assert not dark.found and dark.error.startswith("all dark")
     sat = detect_pose(np.minimum(p.rotstar * 60, fs), d435_seq.layout, full_scale=fs)
     assert not sat.found and sat.error.startswith("saturated")

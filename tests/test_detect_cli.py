@@ -72,6 +72,13 @@ def scaled(k):
     return lambda img: np.clip(img.astype(np.float64) * k, 0, 65535).astype(np.uint16)
 
 
+def in_the_dark(img):
+    """A sensor in the dark: black level, read noise and a signal of a few DN (not scaled(0.01): that
+    scales the noise too and is a well exposed image in fewer bits)"""
+    rng = np.random.default_rng(0)
+    return np.clip(200 + img * 0.0005 + rng.normal(0, 30, img.shape), 0, 65535).astype(np.uint16)
+
+
 def moved_poses(model, layout, rt0, rng):
     """Per-frame poses: a rotation drifting to ~3 px of image motion; random ~1 px shakes"""
     f = model.intrinsics()[1][0]
@@ -119,7 +126,7 @@ def bad_seq(d435_seq, tmp_path_factory):
             lambda img: np.dstack((img, img, img // 2)))
     d = copy("pose006", "dark")
     for fn in ROTSTAR + ["checkerboard.png"]:
-        rewrite(d, fn, scaled(0.01))
+        rewrite(d, fn, in_the_dark)
     d = copy("pose006", "saturated")
     for fn in ROTSTAR + ["checkerboard.png"]:
         rewrite(d, fn, scaled(60))
@@ -301,7 +308,7 @@ def test_no_pose_gives_a_board(d435_seq, run_cli, tmp_path):
     shutil.copy(os.path.join(d435_seq.path, "pattern.json"), seq)
     d = copy_pose(d435_seq.path, "pose001", seq, "dark")
     for fn in ROTSTAR:
-        rewrite(d, fn, scaled(0.01))
+        rewrite(d, fn, in_the_dark)
     os.remove(os.path.join(copy_pose(d435_seq.path, "pose001", seq, "missing"), "rotstar_07.png"))
     r = run_cli("rotstar-detect", seq, cwd=tmp_path)
     assert r.returncode == 1

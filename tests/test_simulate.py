@@ -437,7 +437,7 @@ def test_cli(tmp_path, capsys):
     assert ds.load_pose(out, "pose001", LAYOUT).full_scale == 255.0
     t = load_truth(out)
     assert t.settings["camera"] == "pinhole-small" and t.settings["noise"] == 0.02
-    assert main(["--out", out, "--pattern", str(pat), "--camera", "pinhole-small", "--poses", "1"]) == 1  # exists
+    assert main(["--out", out, "--pattern", str(pat), "--camera", "pinhole-small", "--poses", "1"]) == 2  # exists
     with pytest.raises(SystemExit) as e:
         main(["--help"])
     assert e.value.code == 0

@@ -83,11 +83,16 @@ class ReplaySource(FrameSource):
         self.t_ns = None
         self._video = None
         meta_fps = 0.0
+        if os.path.exists(path) and not (os.path.isdir(path) or os.path.isfile(path)):
+            raise CaptureError(f"{path}: not a regular file or folder")
         if os.path.isdir(path):
             files = sorted((f for f in os.listdir(path) if f.lower().endswith(IMAGE_EXTENSIONS)), key=natural_key)
             if not files:
                 raise CaptureError(f"{path}: no image files ({', '.join(IMAGE_EXTENSIONS)})")
             self.files = [os.path.join(path, f) for f in files]
+            odd = next((f for f in self.files if not os.path.isfile(f)), None)
+            if odd:  # a FIFO would block the reader
+                raise CaptureError(f"{odd}: not a regular file")
             first = self._image(0)
             self.n, self.dtype = len(files), first.dtype
         elif path.endswith(".npy"):

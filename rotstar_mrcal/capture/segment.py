@@ -281,8 +281,10 @@ def segment(frames, frames_list: list[dict], layout: Layout, full_scale: float,
     """Split a recording (T, H, W) into the frames of pattern.json; see the module docstring"""
     loop = player_loop(frames_list)
     n_frames = len(frames_list)
-    if len(frames) < 2:
-        raise SegmentError(f"{len(frames)} frame(s): record at least one whole loop of the player")
+    need = len(loop) * opts.min_len  # one whole loop: every entry still for min_len frames
+    if len(frames) < need:
+        raise SegmentError(f"the recording is too short: {len(frames)} frame(s), need at least {need} (one whole "
+                           f"loop of the player: {len(loop)} entries of >= {opts.min_len} frames each)")
     d, level = difference_signal(frames, full_scale, opts.step)
     tau = threshold(d, opts.k, opts.ratio)
     runs = stable_runs(d, tau, opts.min_len)

@@ -24,7 +24,8 @@ from ..capture.segment import SegmentError, segment, threshold
 from ..capture.source import CaptureError, ControlError, FrameSource, record, skip
 from ..display.loop import player_loop
 from ..display.player import DEFAULT_HOLD
-from .common import say, size_arg
+from .common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_INTERRUPTED, atomic_path, atomic_write, check_output_path, \
+    fail, run, say, size_arg
 from .segment import add_segment_options, options_from
 
 DESCRIPTION = """\
@@ -61,7 +62,8 @@ examples:
   rotstar-capture --pattern pattern/ --out seq --auto --poses 30
   rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --frames 300
   rotstar-detect seq/exp4000us > corners.vnl
-"""
+
+""" + EXIT_CODES_HELP + " (a camera that cannot be opened or set: 1)\n"
 
 
 def _exposures(s: str) -> list[int]:
@@ -287,7 +289,8 @@ def process_recording(src, ds: Dataset, pose: str, pattern, layout, frames, seqn
     ds.boards.append(r.corners)
     ds.imagersize = (frames.shape[2], frames.shape[1])
     counts = coverage.coverage_counts(ds.boards, ds.imagersize)
-    cv2.imwrite(os.path.join(ds.folder, "coverage.png"), coverage.coverage_image(ds.boards, ds.imagersize))
+    with atomic_path(os.path.join(ds.folder, "coverage.png")) as tmp:
+        cv2.imwrite(tmp, coverage.coverage_image(ds.boards, ds.imagersize))
     state = "complete" if r.n_valid == total else f"{total - r.n_valid} corner(s) missing"
     if r.shifts is not None:
         ds.shifts[pose] = r.shifts
@@ -303,6 +306,10 @@ def process_recording(src, ds: Dataset, pose: str, pattern, layout, frames, seqn
 
 
 def main(argv=None, source: FrameSource | None = None) -> int:
+    return run("rotstar-capture", lambda argv: _main(argv, source), argv)
+
+
+def _main(argv=None, source: FrameSource | None = None) -> int:
     a = parse_args(argv)
     if a.list:
         print_nodes(describe_nodes())
@@ -310,8 +317,8 @@ def main(argv=None, source: FrameSource | None = None) -> int:
     try:
         pattern, layout = dataset.read_pattern(a.pattern)
     except dataset.DatasetError as e:
-        say(f"rotstar-capture: {e}")
-        return 2
+        fail(str(e))
+    check_output_path(a.out, [dataset.pattern_file(a.pattern)], folder=True)
     n_entries = len(player_loop(pattern["frames"]))
     warn = format_warning(a.fourcc) if a.camera == "d435" and a.backend != "replay" else None
     if warn:
@@ -320,10 +327,10 @@ def main(argv=None, source: FrameSource | None = None) -> int:
     try:
         src = source or open_source(a.backend, a.device, a.camera, a.fourcc, a.size, fps, a.serial)
     except CaptureError as e:
-        say(f"rotstar-capture: {e}")
-        return 3
+        fail(str(e), EXIT_FAILED)
     datasets = [Dataset(os.path.join(a.out, f"exp{e}us"), e) for e in a.exposure] if a.exposure else [Dataset(a.out, None)]
     raw_dir = os.path.join(a.out, "raw")
+    interrupted = False
     log = {"format": "rotstar-capture/1", "started": time.strftime("%Y-%m-%d %H:%M:%S"), "argv": sys.argv[1:] if argv is None else list(argv)}
     try:
         log["source"] = src.info()
@@ -370,7 +377,7 @@ def main(argv=None, source: FrameSource | None = None) -> int:
                 break
             finally:
                 log["poses"] = {os.path.basename(os.path.normpath(d.folder)): d.log for d in datasets}
-                with open(os.path.join(a.out, "capture.json"), "w") as f:
+                with atomic_write(os.path.join(a.out, "capture.json")) as f:
                     json.dump(log, f, indent=1, default=str)
             tau = min((d.tau for d in datasets if d.tau is not None), default=tau)
             if ok_any:
@@ -378,9 +385,10 @@ def main(argv=None, source: FrameSource | None = None) -> int:
                 pose_no += 1
     except CaptureError as e:
         say(f"rotstar-capture: {e}")
-        return 3
-    except KeyboardInterrupt:
+        return EXIT_FAILED
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the poses so far are kept, the summary follows
         say("rotstar-capture: interrupted")
+        interrupted = True
     finally:
         try:
             src.stop()
@@ -391,7 +399,9 @@ def main(argv=None, source: FrameSource | None = None) -> int:
     for ds in datasets:
         good = sum(1 for e in ds.log if e.get("ok"))
         say(f"rotstar-capture: {ds.folder}: {good} pose(s) with a board; next: rotstar-detect {ds.folder} > corners.vnl")
-    return 0 if any(e.get("ok") for ds in datasets for e in ds.log) else 1
+    if interrupted:
+        return EXIT_INTERRUPTED
+    return 0 if any(e.get("ok") for ds in datasets for e in ds.log) else EXIT_FAILED
 
 
 if __name__ == "__main__":

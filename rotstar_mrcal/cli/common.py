@@ -3,8 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import math
+import os
+import secrets
+import signal
 import sys
+import threading
 import time
+from typing import NoReturn
 
 
 def say(msg: str) -> None:
@@ -31,6 +38,164 @@ def size_arg(s: str) -> tuple[int, int]:
     """argparse type for WIDTHxHEIGHT, e.g. 2360x1640 -> (2360, 1640)"""
     try:
         w, h = s.lower().split("x")
-        return int(w), int(h)
+        w, h = int(w), int(h)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{s!r}: expected WIDTHxHEIGHT, e.g. 2360x1640") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"{s!r}: width and height must be positive")
+    return w, h
+
+
+def number_arg(kind=float, lo: float | None = None, hi: float | None = None, lo_open: bool = False):
+    """argparse type: a finite int or float in [lo, hi] ((lo, hi] with lo_open), with a clear message
+
+    SYNOPSIS
+
+        >>> number_arg(float, 2)("10")
+        10.0
+        >>> number_arg(float, 2)("nan")
+        Traceback (most recent call last):
+        argparse.ArgumentTypeError: 'nan': must be a finite number >= 2
+    """
+    want = ("an integer" if kind is int else "a finite number") + (
+        f" {'>' if lo_open else '>='} {lo:g}" if lo is not None else "") + (f" and <= {hi:g}" if hi is not None else "")
+
+    def parse(s: str):
+        try:
+            v = kind(s)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{s!r}: must be {want}") from None
+        if not math.isfinite(v) or (lo is not None and (v <= lo if lo_open else v < lo)) or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"{s!r}: must be {want}")
+        return v
+
+    parse.__name__ = "int" if kind is int else "number"  # argparse's "invalid <name> value" fallback
+    return parse
+
+
+# ---- exit codes, one-line errors, interrupts ----------------------------------------------
+EXIT_OK = 0  # done
+EXIT_FAILED = 1  # the job ran but failed, or its result is partial
+EXIT_BAD_INPUT = 2  # bad input or arguments (argparse's own code)
+EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM (128 + SIGINT, as a shell reports it)
+
+EXIT_CODES_HELP = ("exit status: 0 done; 1 the job ran but failed or its result is partial; "
+                   "2 bad input or arguments; 130 interrupted (Ctrl-C, SIGTERM)")
+
+
+class Failure(Exception):
+    """A one-line message for the user and the exit code; raised by fail(), printed by run()"""
+
+    def __init__(self, msg: str, code: int = EXIT_BAD_INPUT):
+        super().__init__(msg)
+        self.code = code
+
+
+def fail(msg: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
+    """Stop the command: run() prints 'prog: msg' on stderr and exits with code"""
+    raise Failure(msg, code)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread like Ctrl-C so that the same clean-up runs"""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def run(prog: str, main_fn, argv=None) -> int:
+    """Run main_fn(argv) as command prog: Failure -> 'prog: msg' and its code; Ctrl-C or
+    SIGTERM -> 'prog: interrupted' and 130 (no traceback; atomic_write removes partial files)
+
+    SYNOPSIS
+
+        >>> run("rotstar-x", lambda argv: fail("seq/pattern.json: grid.nx is 0"))  # doctest: +SKIP
+        rotstar-x: seq/pattern.json: grid.nx is 0
+        2
+    """
+    main_thread = threading.current_thread() is threading.main_thread()  # (signal handlers live there)
+    old = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
+    try:
+        return main_fn(argv)
+    except Failure as e:
+        say(f"{prog}: {e}")
+        return e.code
+    except KeyboardInterrupt:
+        say(f"{prog}: interrupted")
+        return EXIT_INTERRUPTED
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, old)
+
+
+from ..parallel import process_map  # noqa: F401  (the commands' worker pool)
+
+
+# ---- output paths --------------------------------------------------------------------------
+def _inside(path: str, folder: str) -> bool:
+    path, folder = os.path.realpath(path), os.path.realpath(folder)
+    return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)
+
+
+def check_output_path(path: str, inputs=(), folder: bool = False) -> str:
+    """Check, before any work, that path can be written; fail() with 'path: reason' if not
+
+    A file (folder=False) needs an existing, writable parent folder and must not
+    be a folder itself; a folder (folder=True) is created with its parents later,
+    so nothing on the way may be a file. Neither may be one of the inputs: a file
+    in inputs, or anything inside a folder in inputs (a pose folder). Returns path.
+    """
+    if not path:
+        fail("empty output path")
+    for inp in inputs:
+        if _inside(path, inp):
+            where = "is the input" if os.path.realpath(path) == os.path.realpath(inp) else "is inside the input folder"
+            fail(f"{path}: {where} {inp}; write the output elsewhere")
+    if folder:
+        if os.path.exists(path) and not os.path.isdir(path):
+            fail(f"{path}: exists and is not a folder")
+        up = os.path.dirname(os.path.normpath(path)) or "."
+        while not os.path.exists(up):
+            up = os.path.dirname(up) or "."
+        if not os.path.isdir(up):
+            fail(f"{path}: cannot create the folder, {up} is a file")
+        if not os.access(up, os.W_OK | os.X_OK):
+            fail(f"{path}: cannot create the folder, {up} is not writable")
+        return path
+    if os.path.isdir(path):
+        fail(f"{path}: is a folder; give a file name")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.exists(parent):
+        fail(f"{path}: no such folder {os.path.dirname(path) or '.'}")
+    if not os.path.isdir(parent):
+        fail(f"{path}: {os.path.dirname(path)} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        fail(f"{path}: folder {os.path.dirname(path) or '.'} is not writable")
+    if os.path.exists(path) and not os.path.isfile(path):
+        fail(f"{path}: not a regular file")
+    return path
+
+
+@contextlib.contextmanager
+def atomic_path(path: str):
+    """Yield a temporary path in path's folder (same extension, for writers that go by it);
+    renamed to path when the block ends, removed if it raises or is interrupted"""
+    d, base = os.path.split(path)
+    stem, ext = os.path.splitext(base)
+    tmp = os.path.join(d, f".{stem}.{os.getpid()}-{secrets.token_hex(3)}.part{ext}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+        raise
+
+
+@contextlib.contextmanager
+def atomic_write(path: str, mode: str = "w", **kw):
+    """open(path, mode) that writes a temporary file in the same folder, renamed on success"""
+    with atomic_path(path) as tmp:
+        with open(tmp, mode, **kw) as f:
+            yield f

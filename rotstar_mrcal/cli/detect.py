@@ -8,11 +8,12 @@ import shlex
 import sys
 
 from .. import dataset
-from ..detect.pipeline import REFINERS
+from ..detect.pipeline import MIN_WINDOW, REFINERS
 from ..detect.run import detect_dataset
 from ..focal import estimate_focal
 from ..vnl import write_corners
-from .common import Progress, say
+from .common import (EXIT_CODES_HELP, EXIT_FAILED, Progress, atomic_write, check_output_path, fail, number_arg, run,
+                     say)
 
 DESCRIPTION = """\
 Detect the corners of every pose of a recorded rotating-star dataset and write
@@ -33,7 +34,8 @@ EPILOG = """\
 example:
   rotstar-detect seq/ > corners.vnl
   mrcal-calibrate-cameras --corners-cache corners.vnl ...   (printed on stderr)
-"""
+
+""" + EXIT_CODES_HELP + "\n"
 
 
 def parse_args(argv=None):
@@ -41,7 +43,7 @@ def parse_args(argv=None):
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("seq", help="dataset folder holding pattern.json and one folder per pose")
     p.add_argument("-o", "--output", help="write corners.vnl here instead of stdout")
-    p.add_argument("--window", type=float, default=10.0,
+    p.add_argument("--window", type=number_arg(float, MIN_WINDOW), default=10.0,
                    help="refinement half-window w in camera pixels (default 10); capped per corner "
                         "so the window stays inside its element")
     p.add_argument("--refine", choices=REFINERS, default="symmetric",
@@ -51,10 +53,10 @@ def parse_args(argv=None):
     p.add_argument("--weights", action="store_true",
                    help="write a weight column (1/sigma of each corner, normalised to median 1) "
                         "for mrcal's --corners-cache-has-weights")
-    p.add_argument("--max-motion", type=float, default=0.15,
+    p.add_argument("--max-motion", type=number_arg(float, 0, lo_open=True), default=0.15,
                    help="reject a pose whose frames disagree by more than this many pixels "
                         "(the camera moved during the sequence; default 0.15)")
-    p.add_argument("--jobs", "-j", type=int, default=1, help="poses processed in parallel (default 1)")
+    p.add_argument("--jobs", "-j", type=number_arg(int, 1), default=1, help="poses processed in parallel (default 1)")
     p.add_argument("--no-hint", action="store_true", help=argparse.SUPPRESS)  # rotstar-calibrate runs its own
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines (skipped poses are still reported)")
     return p.parse_args(argv)
@@ -74,6 +76,10 @@ def mrcal_command(layout, imagersize, focal, vnl_name, glob) -> str:
 
 
 def main(argv=None) -> int:
+    return run("rotstar-detect", _main, argv)
+
+
+def _main(argv=None) -> int:
     a = parse_args(argv)
     progress = None
 
@@ -84,31 +90,40 @@ def main(argv=None) -> int:
             progress.step(r.pose, f"skipped: {r.error}", important=True)
 
     try:
-        _, layout = dataset.read_pattern(a.seq)
-        poses = dataset.list_poses(a.seq, _["frames"])
-        if not poses:
-            raise dataset.DatasetError(f"{a.seq}: no pose folders with frames from pattern.json")
-        progress = Progress(len(poses), a.quiet)
+        pattern, layout = dataset.read_pattern(a.seq)
+        frames = pattern["frames"]
+        poses = dataset.list_poses(a.seq, frames)
+        unmatched = dataset.unmatched_folders(a.seq, frames)
+    except dataset.DatasetError as e:
+        fail(str(e))
+    if not poses:
+        why = f" ({next(iter(unmatched.values()))})" if unmatched else ""
+        fail(f"{a.seq}: no pose folders with frames from pattern.json{why}")
+    if a.output:  # never over an input: pattern.json, a frame, anything in a pose folder
+        check_output_path(a.output, [os.path.join(a.seq, "pattern.json")]
+                          + [os.path.join(a.seq, p) for p in poses + list(unmatched)])
+    progress = Progress(len(poses) + len(unmatched), a.quiet)
+    for name, msg in unmatched.items():
+        progress.step(name, f"skipped: {msg}", important=True)
+    try:
         det = detect_dataset(a.seq, window=a.window, refine=a.refine, max_motion=a.max_motion, jobs=a.jobs,
                              poses=poses, progress=report)
     except dataset.DatasetError as e:
-        say(f"rotstar-detect: {e}")
-        return 2
+        fail(str(e))
     for r in det.rejected:
         say(f"{r.pose}: skipped: {r.error}")
     if a.refine == "symmetric":
         say(f"rotstar-detect: {det.display.summary()}")
-    boards = det.boards()
-    out = open(a.output, "w") if a.output else sys.stdout
-    try:
-        write_corners(out, boards, det.weights() if a.weights else None)
-    finally:
-        if a.output:
-            out.close()
+    weights = det.weights() if a.weights else None
+    if a.output:
+        with atomic_write(a.output) as out:
+            write_corners(out, det.boards(), weights)
+    else:
+        write_corners(sys.stdout, det.boards(), weights)
     found = [r.corners.corners for r in det.found]
-    say(f"rotstar-detect: {len(found)} of {len(det.results)} poses gave a board")
+    say(f"rotstar-detect: {len(found)} of {len(det.results) + len(unmatched)} poses gave a board")
     if not found:
-        return 1
+        return EXIT_FAILED
     sizes = det.sizes
     if len(sizes) > 1:
         say(f"rotstar-detect: warning: poses have different image sizes {sizes}")

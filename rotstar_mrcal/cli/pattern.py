@@ -12,7 +12,8 @@ import cv2
 from ..display.player import write_player
 from ..pattern.layout import make_layout
 from ..pattern.render import encode_display, render_frame
-from .common import say, size_arg
+from .common import EXIT_CODES_HELP, EXIT_FAILED, atomic_path, atomic_write, check_output_path, fail, number_arg, \
+    run, say, size_arg
 
 DESCRIPTION = """\
 Write the rotating-star display sequence for one screen: NFRAMES frames in
@@ -30,55 +31,69 @@ a D435-class camera (1280x800, ~90 degrees) at 0.3-0.6 m.
 
 
 def _angle(s: str) -> float:
+    """argparse type: radians or pi/N, finite and not 0"""
     t = s.strip().lower().replace(" ", "")
-    if t.startswith("pi/"):
-        return math.pi / float(t[3:])
-    return float(t)
+    try:
+        v = math.pi / float(t[3:]) if t.startswith("pi/") else float(t)
+    except (ValueError, ZeroDivisionError):
+        raise argparse.ArgumentTypeError(f"{s!r}: expected radians or pi/N, e.g. pi/16") from None
+    if not math.isfinite(v) or v == 0:
+        raise argparse.ArgumentTypeError(f"{s!r}: the rotation per frame must be finite and not 0")
+    return v
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(prog="rotstar-pattern", description=DESCRIPTION,
+    p = argparse.ArgumentParser(prog="rotstar-pattern", description=DESCRIPTION, epilog=EXIT_CODES_HELP,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", "-o", default="pattern", help="output folder (default ./pattern)")
     p.add_argument("--screen", type=size_arg, default=(2360, 1640), help="screen size in display pixels (default 2360x1640)")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--ppi", type=float, default=264.0, help="display pixels per inch (default 264)")
-    g.add_argument("--pixel-pitch-mm", type=float, help="display pixel pitch in millimetres (instead of --ppi)")
-    p.add_argument("--pitch", type=int, default=150, help="grid pitch: display pixels between corners, even (default 150)")
-    p.add_argument("--band", type=int, default=40,
+    g.add_argument("--ppi", type=number_arg(float, 0, lo_open=True), default=264.0, help="display pixels per inch (default 264)")
+    g.add_argument("--pixel-pitch-mm", type=number_arg(float, 0, lo_open=True), help="display pixel pitch in millimetres (instead of --ppi)")
+    p.add_argument("--pitch", type=number_arg(int, 2), default=150, help="grid pitch: display pixels between corners, even (default 150)")
+    p.add_argument("--band", type=number_arg(int, 2), default=40,
                    help="border-band width in display pixels, even; about 0.25-0.3 of the pitch (default 40)")
-    p.add_argument("--nx", type=int, help="corners across (default: as many as fit)")
-    p.add_argument("--ny", type=int, help="corners down (default: as many as fit)")
-    p.add_argument("--frames", type=int, default=8, help="rotating-star frames (default 8)")
+    p.add_argument("--nx", type=number_arg(int, 3), help="corners across (default: as many as fit)")
+    p.add_argument("--ny", type=number_arg(int, 3), help="corners down (default: as many as fit)")
+    p.add_argument("--frames", type=number_arg(int, 2, 64), default=8,
+                   help="rotating-star frames, at least 2: the corners are where the turned frames agree (default 8)")
     p.add_argument("--step", type=_angle, default=math.pi / 16, help="rotation per frame, radians or pi/N (default pi/16)")
-    p.add_argument("--gamma", type=float, default=2.2,
+    p.add_argument("--gamma", type=number_arg(float, 0.1, 10), default=2.2,
                    help="display gamma applied to the PNG values so that anti-aliased pixels emit the "
                         "right amount of light (default 2.2; 1 writes linear values)")
-    return p.parse_args(argv)
+    a = p.parse_args(argv)
+    if (a.frames - 1) * abs(a.step) >= math.pi:
+        p.error(f"--frames {a.frames} turned by --step {a.step:g} reach pi, where the frames repeat; "
+                f"use a smaller step (at most pi/{a.frames})")
+    return a
 
 
 def main(argv=None) -> int:
+    return run("rotstar-pattern", _main, argv)
+
+
+def _main(argv=None) -> int:
     a = parse_args(argv)
     pitch_m = a.pixel_pitch_mm / 1000 if a.pixel_pitch_mm else 0.0254 / a.ppi
     try:
         layout = make_layout(screen=a.screen, pixel_pitch_m=pitch_m, pitch=a.pitch, band=a.band,
                              nframes=a.frames, step=a.step, nx=a.nx, ny=a.ny)
     except ValueError as e:
-        say(f"rotstar-pattern: {e}")
-        return 2
+        fail(str(e))
+    check_output_path(a.out, folder=True)
     os.makedirs(a.out, exist_ok=True)
     frames = layout.frames()
     for k, f in enumerate(frames):
         fn = os.path.join(a.out, f["file"])
-        if not cv2.imwrite(fn, encode_display(render_frame(layout, f), a.gamma)):
-            say(f"rotstar-pattern: {fn}: cannot write")
-            return 1
+        with atomic_path(fn) as tmp:
+            if not cv2.imwrite(tmp, encode_display(render_frame(layout, f), a.gamma)):
+                fail(f"{fn}: cannot write", EXIT_FAILED)
         say(f"[{k + 1}/{len(frames)}] {fn}")
     d = layout.to_dict()
     d["display_gamma"] = a.gamma
     import json
 
-    with open(os.path.join(a.out, "pattern.json"), "w") as fh:
+    with atomic_write(os.path.join(a.out, "pattern.json")) as fh:
         json.dump(d, fh, indent=2)
         fh.write("\n")
     say(f"wrote {write_player(a.out)}: open it on the screen, full screen (doc/capture.md)")

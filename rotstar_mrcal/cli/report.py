@@ -49,9 +49,14 @@ def slug(s: str) -> str:
 
 def load_results(path: str) -> tuple[dict, str]:
     fn = os.path.join(path, "results.json") if os.path.isdir(path) else path
-    with open(fn) as f:
-        r = json.load(f)
-    if r.get("format") != "rotstar-crossval/1":
+    if not os.path.isfile(fn):
+        raise ValueError(f"{fn}: {'no such file' if not os.path.exists(fn) else 'not a regular file'}")
+    try:
+        with open(fn) as f:
+            r = json.load(f)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"{fn}: not a rotstar-crossval results file ({e})") from None
+    if not isinstance(r, dict) or r.get("format") != "rotstar-crossval/1":
         raise ValueError(f"{fn}: not a rotstar-crossval results file")
     return r, os.path.dirname(os.path.abspath(fn))
 

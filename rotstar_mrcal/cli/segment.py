@@ -12,7 +12,7 @@ from ..capture.backend_replay import ReplaySource
 from ..capture.pose import quick_check, value_scale, write_segmented
 from ..capture.segment import Options, SegmentError, segment
 from ..capture.source import CaptureError
-from .common import say, size_arg
+from .common import EXIT_FAILED, atomic_path, atomic_write, check_output_path, fail, run, say, size_arg
 
 DESCRIPTION = """\
 Split a continuous recording of player.html (the start marker, then every
@@ -33,7 +33,7 @@ usually lossy: a last resort).
 
 Progress and the verdict go to stderr; stdout gets the pose folder only.
 Exit status: 0 written, 1 the recording cannot be split (the reason is
-printed), 2 bad input.
+printed), 2 bad input or arguments, 130 interrupted.
 """
 
 EPILOG = """\
@@ -113,29 +113,35 @@ def plot_signal(fn: str, seg, title: str) -> None:
     ax.set_title(title + "\n" + seg.summary(), fontsize=9)
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(fn, dpi=100)
+    with atomic_path(fn) as tmp:
+        fig.savefig(tmp, dpi=100)
     plt.close(fig)
 
 
 def main(argv=None) -> int:
+    return run("rotstar-segment", _main, argv)
+
+
+def _main(argv=None) -> int:
     a = parse_args(argv)
     try:
         pattern, layout = dataset.read_pattern(a.pattern)
     except dataset.DatasetError as e:
-        say(f"rotstar-segment: {e}")
-        return 2
+        fail(str(e))
     out = os.path.normpath(a.out)
     seq, pose = os.path.dirname(out) or ".", os.path.basename(out)
+    inputs = [a.recording, dataset.pattern_file(a.pattern)]
+    check_output_path(out, inputs, folder=True)
+    if a.plot:
+        check_output_path(a.plot, inputs)
     names = {f["file"] for f in pattern["frames"]}
     if os.path.isdir(out) and names & set(os.listdir(out)) and not a.force:
-        say(f"rotstar-segment: {out} already holds frames (use --force to overwrite)")
-        return 2
+        fail(f"{out} already holds frames (use --force to overwrite)")
     try:
         src = ReplaySource(a.recording, size=a.size, fourcc=a.fourcc)
         frames = src.frames()
     except CaptureError as e:
-        say(f"rotstar-segment: {e}")
-        return 2
+        fail(str(e))
     for note in src.notes:
         say(f"rotstar-segment: note: {note}")
     say(f"rotstar-segment: {a.recording}: {len(frames)} frames of {frames.shape[2]}x{frames.shape[1]}, "
@@ -147,8 +153,7 @@ def main(argv=None) -> int:
     try:
         seg = segment(frames, pattern["frames"], layout, src.full_scale, options_from(a))
     except SegmentError as e:
-        say(f"rotstar-segment: {a.recording}: {e}")
-        return 1
+        fail(f"{a.recording}: {e}", EXIT_FAILED)
     say(f"rotstar-segment: {seg.summary()}")
     for v in seg.loops:
         if not v.ok:
@@ -165,8 +170,7 @@ def main(argv=None) -> int:
         folder = write_segmented(seq, pose, seg, pattern, src.full_scale, scale,
                                  {"recording": os.path.abspath(a.recording), "dropped_camera_frames": gaps})
     except (dataset.DatasetError, OSError, ValueError) as e:
-        say(f"rotstar-segment: {e}")
-        return 2
+        fail(str(e))
     if a.plot:
         plot_signal(a.plot, seg, a.recording)
         say(f"rotstar-segment: wrote {a.plot}")
@@ -181,7 +185,7 @@ def main(argv=None) -> int:
         with open(os.path.join(folder, "segment.json")) as f:
             info = json.load(f)
         info["quick_check"] = {"found": r.found, "corners": r.n_valid, "error": r.error, "motion_px": r.motion_px}
-        with open(os.path.join(folder, "segment.json"), "w") as f:
+        with atomic_write(os.path.join(folder, "segment.json")) as f:
             json.dump(info, f, indent=1, default=float)
             f.write("\n")
     print(folder)

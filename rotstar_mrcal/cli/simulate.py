@@ -13,6 +13,7 @@ stderr; stdout gets only the output folder, for piping.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 
@@ -25,6 +26,7 @@ from ..simulate.camera import PRESETS, preset_model
 from ..simulate.dataset import Settings, write_dataset
 from ..simulate.poses import default_distance_range, random_poses
 from ..simulate.screen import exact_frames, png_frames
+from .common import EXIT_CODES_HELP, EXIT_FAILED, check_output_path, fail, run
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -33,6 +35,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         description="Render a synthetic dataset: the rotating-star screen seen by a camera at random "
         "poses, exposed and quantised like a real sensor, with the ground truth (true camera model, "
         "poses and corner projections) next to it.",
+        epilog=EXIT_CODES_HELP,
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("--out", required=True, metavar="SEQ", help="dataset folder to write")
@@ -107,6 +110,9 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error(f"--value-bits must be between 1 and --bits ({args.bits})")
     if args.screen_png and not args.pattern:
         p.error("--screen-png needs --pattern DIR")
+    if not all(math.isfinite(v) for v in (args.blur, args.noise, args.shot, args.gain, args.black, args.room,
+                                          args.max_tilt, *(args.distance or ()), *([args.margin] if args.margin else []))):
+        p.error("--blur, --noise, --shot, --gain, --black, --room, --max-tilt, --distance and --margin must be finite")
     if args.blur < 0 or args.noise < 0 or args.shot < 0:
         p.error("--blur, --noise and --shot must not be negative")
     return args
@@ -141,12 +147,21 @@ def display_offsets(spec: str | None, n: int, seed: int) -> np.ndarray | None:
 def load_camera(spec: str) -> tuple[mrcal.cameramodel, str]:
     if spec in PRESETS:
         return preset_model(spec), spec
+    if os.path.isfile(spec):
+        try:
+            return mrcal.cameramodel(spec), os.path.abspath(spec)
+        except Exception:  # mrcal raises a bare Exception listing every format it tried
+            raise ValueError(f"{spec}: not a readable camera model (mrcal cannot parse it)") from None
     if os.path.exists(spec):
-        return mrcal.cameramodel(spec), os.path.abspath(spec)
+        raise ValueError(f"{spec}: not a regular file")
     raise ValueError(f"--camera {spec!r}: neither a preset ({', '.join(PRESETS)}) nor a file")
 
 
 def main(argv=None) -> int:
+    return run("rotstar-simulate", _main, argv)
+
+
+def _main(argv=None) -> int:
     args = parse_args(argv)
 
     def say(msg):
@@ -158,8 +173,15 @@ def main(argv=None) -> int:
         else:
             layout = make_layout()
         model, camera = load_camera(args.camera)
+        check_output_path(args.out, folder=True)
+        if args.pattern and os.path.realpath(args.out) == os.path.realpath(
+                args.pattern if os.path.isdir(args.pattern) else os.path.dirname(args.pattern) or "."):
+            fail(f"{args.out}: is the --pattern folder; write the dataset elsewhere")
         if not args.force and os.path.exists(os.path.join(args.out, "truth.json")):
-            raise ValueError(f"{args.out} already holds a simulated dataset (use --force to overwrite)")
+            fail(f"{args.out} already holds a simulated dataset (use --force to overwrite)")
+    except (DatasetError, ValueError) as e:
+        fail(str(e))
+    try:
         frames = png_frames(args.pattern, layout) if args.screen_png else exact_frames(layout)
         distance = tuple(args.distance) if args.distance else default_distance_range(model, layout)
         say(
@@ -207,8 +229,7 @@ def main(argv=None) -> int:
             },
         )
     except (DatasetError, ValueError, RuntimeError, OSError) as e:
-        say(f"error: {e}")
-        return 1
+        fail(f"error: {e}", EXIT_FAILED)
     print(args.out)
     return 0
 

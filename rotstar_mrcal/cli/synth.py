@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from .common import say
+from .common import EXIT_CODES_HELP, atomic_path, atomic_write, check_output_path, fail, number_arg, run, say
 
 
 def _floats(xs):
@@ -41,7 +41,7 @@ def _amplitudes(items):
         try:
             out.append((name, float(val)))
         except ValueError:
-            raise SystemExit(f"rotstar-synth: --amplitude wants NAME=WAVES, not {it!r}") from None
+            fail(f"--amplitude wants NAME=WAVES, not {it!r}")
     return tuple(out)
 
 
@@ -52,7 +52,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
     d = Protocol()
     p = argparse.ArgumentParser(prog="rotstar-synth", description=__doc__.split("\n\n")[0].split(": ", 1)[1],
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                epilog=EXIT_CODES_HELP, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True)
 
     def protocol_args(q, full=True):
@@ -67,15 +67,16 @@ def parse_args(argv=None) -> argparse.Namespace:
         q.add_argument("--fnumber", type=float, default=d.optics.fnumber)
         q.add_argument("--pixel-um", type=float, default=d.optics.pixel_um)
         q.add_argument("--wavelength-um", type=float, default=d.optics.wavelength_um)
-        q.add_argument("--supersample", type=int, default=d.supersample, help="s x s sub-pixels per pixel")
-        q.add_argument("--window", type=int, default=d.window, help="half-window of every refiner and the bound")
+        q.add_argument("--supersample", type=number_arg(int, 1, 64), default=d.supersample, help="s x s sub-pixels per pixel")
+        q.add_argument("--window", type=number_arg(int, 2, 200), default=d.window,
+                       help="half-window of every refiner and the bound")
         if not full:
             return
         q.add_argument("--noise", nargs="+", type=float, default=list(d.noises), metavar="SIGMA",
                        help="noise levels sigma_n in DN (contrast 200 DN)")
         q.add_argument("--phi", nargs="+", type=float, default=list(d.phis_deg), help="tilts, degrees")
         q.add_argument("--alpha", nargs="+", type=float, default=list(d.alphas_deg), help="tilt-axis directions")
-        q.add_argument("--repeats", type=int, default=d.repeats)
+        q.add_argument("--repeats", type=number_arg(int, 1), default=d.repeats)
         q.add_argument("--patterns", nargs="+", choices=PATTERNS, default=list(d.patterns))
         q.add_argument("--refiners", nargs="+", choices=REFINERS, default=list(d.refiners))
         q.add_argument("--perturb", type=float, default=d.perturb, help="start = truth + U(-p, p) in x and y, px")
@@ -89,7 +90,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                    "(explicit --phi/--alpha/--repeats/--noise still apply)")
     e.add_argument("--out", default="synth-out", help="output folder")
     e.add_argument("--cache", metavar="DIR", help="cache folder (default: OUT/cache); rerunning resumes from it")
-    e.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="local worker processes")
+    e.add_argument("--jobs", type=number_arg(int, 1), default=os.cpu_count() or 1, help="local worker processes")
     e.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler (dask.distributed)")
     e.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
 
@@ -161,8 +162,10 @@ def cmd_experiment(args, given) -> int:
 
     protocol = protocol_from(args, given)
     out = args.out
-    os.makedirs(out, exist_ok=True)
+    check_output_path(out, folder=True)
     cache = args.cache or os.path.join(out, "cache")
+    check_output_path(cache, folder=True)
+    os.makedirs(out, exist_ok=True)
     t0 = time.monotonic()
     todo = pending_tasks(protocol, cache) if os.path.isdir(cache) else None
     n_conf = len(protocol.aberrations) * len(protocol.noises) * len(protocol.phis_deg)
@@ -176,23 +179,26 @@ def cmd_experiment(args, given) -> int:
     mean_rows = table.over_tilts(rows)
     vs = verdicts.verdicts(mean_rows)
 
-    with open(os.path.join(out, "protocol.json"), "w") as f:
+    with atomic_write(os.path.join(out, "protocol.json")) as f:
         json.dump(protocol.to_dict(), f, indent=1, default=list)
-    with open(os.path.join(out, "table.json"), "w") as f:
+    with atomic_write(os.path.join(out, "table.json")) as f:
         f.write(table.to_json(protocol, rows, mean_rows))
-    with open(os.path.join(out, "table.md"), "w") as f:
+    with atomic_write(os.path.join(out, "table.md")) as f:
         f.write("# rotstar-synth: every configuration\n\nColumns: see summary.md.\n\n"
                 + table.markdown(rows, with_phi=True))
     figures = []
     if not args.no_plots:
         for n in protocol.noises:
             name = f"range_noise{n:g}.png"
-            plots.range_figure(protocol, rows, n).savefig(os.path.join(out, name), dpi=90)
+            with atomic_path(os.path.join(out, name)) as tmp:
+                plots.range_figure(protocol, rows, n).savefig(tmp, dpi=90)
             figures.append(name)
-        plots.psf_figure(protocol).savefig(os.path.join(out, "psf.png"), dpi=90)
-        plots.views_figure(protocol).savefig(os.path.join(out, "views.png"), dpi=90)
+        with atomic_path(os.path.join(out, "psf.png")) as tmp:
+            plots.psf_figure(protocol).savefig(tmp, dpi=90)
+        with atomic_path(os.path.join(out, "views.png")) as tmp:
+            plots.views_figure(protocol).savefig(tmp, dpi=90)
         figures += ["psf.png", "views.png"]
-    with open(os.path.join(out, "summary.md"), "w") as f:
+    with atomic_write(os.path.join(out, "summary.md")) as f:
         f.write(summary_markdown(protocol, mean_rows, vs, wall, args, figures))
     say(f"rotstar-synth: {wall:.1f} s wall; " + "; ".join(f"finding {v.finding}: {v.status}" for v in vs))
     print(out)
@@ -278,6 +284,10 @@ def cmd_bound(args, given) -> int:
 
 
 def main(argv=None) -> int:
+    return run("rotstar-synth", _main, argv)
+
+
+def _main(argv=None) -> int:
     args = parse_args(argv)
     given = _given(argv)
     return {"experiment": cmd_experiment, "psf": cmd_psf, "bound": cmd_bound}[args.command](args, given)

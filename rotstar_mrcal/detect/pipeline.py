@@ -95,15 +95,29 @@ def _fail(layout: Layout, why: str) -> PoseCorners:
     return PoseCorners(np.full((layout.ny, layout.nx, 2), np.nan), error=why)
 
 
+MIN_CONTRAST_NOISE = 10.0  # darkness: the frames' contrast against their own noise (pure noise: ~5)
+MIN_LEVELS = 8.0  # ... and against the quantisation: grey levels between dark and bright
+
+
 def check_exposure(frames: np.ndarray, full_scale: float) -> str:
-    """'' or why the frames cannot hold a board (dark, saturated, static)"""
+    """'' or why the frames cannot hold a board (dark, saturated, static)
+
+    Darkness is judged on the data, not on the container's full scale (10-bit
+    values stored unscaled in a 16-bit PNG are fine): the contrast between the
+    0.5th and 99.5th percentiles must be MIN_CONTRAST_NOISE times the noise
+    (robust sigma of neighbouring-pixel differences) and MIN_LEVELS grey levels.
+    """
     sub = frames[:, ::4, ::4]
-    hi = float(np.percentile(sub, 99.5))
-    if hi < 0.03 * full_scale:
-        return f"all dark (99.5th percentile {hi:.0f} of {full_scale:.0f})"
     sat = float(np.mean(sub >= full_scale))
     if sat > 0.5:
         return f"saturated ({sat:.0%} of the pixels at full scale)"
+    lo, hi = (float(v) for v in np.percentile(sub, [0.5, 99.5]))
+    d = np.diff(frames[:2, ::8, :], axis=-1)
+    noise = max(float(np.median(np.abs(d - np.median(d)))) * 1.4826 / np.sqrt(2), 0.3)  # >= quantisation
+    if hi - lo < max(MIN_CONTRAST_NOISE * noise, MIN_LEVELS):
+        what = "all dark" if hi < 0.25 * full_scale else "too noisy"
+        return (f"{what} (no contrast above the noise: 0.5-99.5th percentiles {lo:.0f}-{hi:.0f} of "
+                f"{full_scale:.0f}, noise {noise:.1f})")
     return ""
 
 

@@ -14,19 +14,20 @@ display offsets are then estimated over all poses that gave a board
 (detect.display.dataset_offsets) and a pose whose frames moved differently
 from the others is rejected as a camera that moved during the sequence,
 with how far it moved. Nothing here prints: `progress(result)` is called as
-each pose finishes, and the rejections after the dataset check are in
+each pose finishes (parallel.process_map: no worker outlives an interrupt),
+and the rejections after the dataset check are in
 `det.rejected`.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import dataclasses
 import os
 
 import numpy as np
 
 from .. import dataset
+from ..parallel import process_map
 from ..pattern.layout import Layout
 from ..vnl import mrcal_can_read
 from .display import DisplayCheck, dataset_offsets
@@ -90,12 +91,6 @@ def detect_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, 
     return PoseResult(pose, p.first_file, r, r.error, (p.rotstar.shape[2], p.rotstar.shape[1]))
 
 
-def _worker_init():
-    import cv2
-
-    cv2.setNumThreads(1)
-
-
 def detect_dataset(seq: str, *, window: float = 10.0, refine: str = "symmetric", max_motion: float = 0.15,
                    jobs: int = 1, poses: list[str] | None = None, progress=None) -> DatasetCorners:
     """Detect every pose of seq, then check the frames' motion over the dataset; see the module doc
@@ -113,21 +108,8 @@ def detect_dataset(seq: str, *, window: float = 10.0, refine: str = "symmetric",
         if progress:
             progress(r)
 
-    if jobs > 1 and len(poses) > 1:
-        ex = cf.ProcessPoolExecutor(max_workers=min(jobs, len(poses)), initializer=_worker_init)
-        try:
-            futs = [ex.submit(detect_one, seq, p, frames, layout, opts) for p in poses]
-            for f in cf.as_completed(futs):
-                finish(f.result())
-        except BaseException:
-            for p in list(getattr(ex, "_processes", {}).values()):
-                p.terminate()
-            ex.shutdown(wait=False, cancel_futures=True)
-            raise
-        ex.shutdown()
-    else:
-        for p in poses:
-            finish(detect_one(seq, p, frames, layout, opts))
+    for r in process_map(detect_one, [(seq, p, frames, layout, opts) for p in poses], jobs):
+        finish(r)
 
     results = [done[p] for p in poses]
     shifts = {r.pose: r.corners.shifts for r in results if r.found and r.corners.shifts is not None}

@@ -245,25 +245,111 @@ def make_layout(
     )
 
 
+MAX_SCREEN = 100_000  # display pixels; sanity bounds of pattern.json's values
+MAX_CORNERS = 1000
+
+
+def _get(d: dict, field: str, default=None, kind=int, lo=None, hi=None):
+    """d["a"]["b"] for field "a.b", checked: raises ValueError("a.b <what is wrong>")"""
+    v = d
+    for key in field.split("."):
+        if not isinstance(v, dict):
+            raise ValueError(f"{field} missing ({field.rsplit('.', 1)[0]} is not an object)")
+        if key not in v:
+            if default is not None:
+                return default
+            raise ValueError(f"{field} missing")
+        v = v[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"{field} is {json.dumps(v)[:40]}; must be a number")
+    if not math.isfinite(v):
+        raise ValueError(f"{field} is {v}; must be finite")
+    if kind is int:
+        if v != int(v):
+            raise ValueError(f"{field} is {v}; must be an integer")
+        v = int(v)
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        rng = f"between {lo:g} and {hi:g}" if lo is not None and hi is not None else f">= {lo:g}"
+        raise ValueError(f"{field} is {v:g}; must be {rng}")
+    return kind(v)
+
+
+def _check_frames(frames) -> int:
+    """The "frames" list: file names and kinds; returns the number of rotating-star frames"""
+    if not isinstance(frames, list):
+        raise ValueError("frames missing or not a list")
+    names = set()
+    for k, f in enumerate(frames):
+        if not isinstance(f, dict) or not isinstance(f.get("file"), str) or not isinstance(f.get("kind"), str):
+            raise ValueError(f"frames[{k}] must be an object with a file name and a kind")
+        name = f["file"]
+        if not name or name != name.strip() or "/" in name or "\\" in name or name in (".", ".."):
+            raise ValueError(f"frames[{k}].file {name!r} is not a plain file name")
+        if name in names:
+            raise ValueError(f"frames[{k}].file {name!r} appears twice")
+        names.add(name)
+        if f["kind"] not in ("rotstar", "checkerboard"):
+            raise ValueError(f"frames[{k}].kind {f['kind']!r}; must be rotstar or checkerboard")
+    n = sum(1 for f in frames if f["kind"] == "rotstar")
+    if n < 2:
+        raise ValueError(f"frames has {n} rotating-star frame(s); need at least 2 (the corners are where "
+                         "the rotated frames agree)")
+    return n
+
+
 def layout_from_dict(d: dict) -> Layout:
-    """Read a pattern.json dictionary; raises ValueError naming what is wrong"""
-    try:
-        screen, grid = d["screen"], d["grid"]
-        element = d.get("element", {})
-        nframes = sum(1 for f in d["frames"] if f["kind"] == "rotstar")
-        return Layout(
-            screen_width=int(screen["width"]),
-            screen_height=int(screen["height"]),
-            pixel_pitch_m=float(screen["pixel_pitch_m"]),
-            nx=int(grid["nx"]),
-            ny=int(grid["ny"]),
-            pitch=int(grid["pitch"]),
-            band=int(element.get("band", 0)),
-            origin=(int(grid["origin"][0]), int(grid["origin"][1])),
-            nframes=nframes,
-            step=float(element.get("step_rad", math.pi / 16)),
-            marker=tuple(int(v) for v in element.get("marker", (0, 0))),
-            background=float(element.get("background", 0.5)),
-        )
-    except (KeyError, TypeError, IndexError, ValueError) as e:
-        raise ValueError(f"not a rotstar pattern description ({type(e).__name__}: {e})") from None
+    """Read a pattern.json dictionary; raises ValueError naming the field and what is wrong
+
+    SYNOPSIS
+
+        >>> d = make_layout().to_dict()
+        >>> d["grid"]["nx"] = 0
+        >>> layout_from_dict(d)
+        Traceback (most recent call last):
+        ValueError: grid.nx is 0; must be between 3 and 1000
+    """
+    if not isinstance(d, dict):
+        raise ValueError("not a rotstar pattern description (not a JSON object)")
+    for key in ("screen", "grid"):
+        if not isinstance(d.get(key), dict):
+            raise ValueError(f"{key} missing or not an object: not a rotstar pattern description")
+    nframes = _check_frames(d.get("frames"))
+    W = _get(d, "screen.width", lo=1, hi=MAX_SCREEN)
+    H = _get(d, "screen.height", lo=1, hi=MAX_SCREEN)
+    pitch = _get(d, "grid.pitch", lo=2, hi=MAX_SCREEN)
+    origin = d["grid"].get("origin")
+    if not isinstance(origin, list) or len(origin) != 2:
+        raise ValueError(f"grid.origin is {json.dumps(origin)[:40]}; must be [x, y]")
+    g = {"origin": {"x": origin[0], "y": origin[1]}}
+    element = d.get("element", {})
+    if not isinstance(element, dict):
+        raise ValueError("element is not an object")
+    marker = element.get("marker", [0, 0])
+    if not isinstance(marker, list) or len(marker) != 2:
+        raise ValueError(f"element.marker is {json.dumps(marker)[:40]}; must be [i, j]")
+    nx = _get(d, "grid.nx", lo=3, hi=MAX_CORNERS)
+    ny = _get(d, "grid.ny", lo=3, hi=MAX_CORNERS)
+    m = {"element": {"marker": {"i": marker[0], "j": marker[1]}}}
+    step = _get(d, "element.step_rad", math.pi / 16, kind=float)
+    if step == 0 or (nframes - 1) * abs(step) >= math.pi:
+        raise ValueError(f"element.step_rad is {step:g}; {nframes} frames need 0 < |step| < pi/{nframes - 1} "
+                         "(frames turned by pi look the same)")
+    layout = Layout(
+        screen_width=W,
+        screen_height=H,
+        pixel_pitch_m=_get(d, "screen.pixel_pitch_m", kind=float, lo=1e-7, hi=1.0),
+        nx=nx,
+        ny=ny,
+        pitch=pitch,
+        band=_get(d, "element.band", 0, lo=0, hi=pitch // 2),
+        origin=(_get(g, "origin.x", lo=-MAX_SCREEN, hi=MAX_SCREEN), _get(g, "origin.y", lo=-MAX_SCREEN, hi=MAX_SCREEN)),
+        nframes=nframes,
+        step=step,
+        marker=(_get(m, "element.marker.i", lo=0, hi=nx - 1), _get(m, "element.marker.j", lo=0, hi=ny - 1)),
+        background=_get(d, "element.background", 0.5, kind=float, lo=0.0, hi=1.0),
+    )
+    x0, y0, x1, y1 = layout.board_extent()
+    if x0 < 0 or y0 < 0 or x1 > W or y1 > H:
+        raise ValueError(f"grid: {nx}x{ny} corners at pitch {pitch} from origin {tuple(layout.origin)} do not fit "
+                         f"on the {W}x{H} screen")
+    return layout

@@ -82,6 +82,13 @@ def _run(protocol: Protocol, task):
     return task, run_task(protocol, a, phi, noises)
 
 
+def _ignore_sigint() -> None:
+    """Workers: Ctrl-C (sent to the whole process group) is the parent's to handle"""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def run_sweep(protocol: Protocol, cache_dir: str, jobs: int = 1, scheduler: str | None = None,
               progress=None) -> dict:
     """Compute what is missing, then return {(aberration, noise, phi): result} for the whole protocol"""
@@ -105,10 +112,17 @@ def run_sweep(protocol: Protocol, cache_dir: str, jobs: int = 1, scheduler: str 
                 store(*fut.result(), done)
     elif tasks and jobs > 1:
         ctx = multiprocessing.get_context("spawn")
-        with concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, total), mp_context=ctx) as ex:
+        with concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, total), mp_context=ctx,
+                                                    initializer=_ignore_sigint) as ex:
             futures = [ex.submit(_run, protocol, t) for t in tasks]
-            for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
-                store(*fut.result(), done)
+            try:
+                for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
+                    store(*fut.result(), done)
+            except BaseException:  # Ctrl-C, SIGTERM, an error: stop now, not after the queued tasks
+                ex.shutdown(wait=False, cancel_futures=True)
+                for proc in list((getattr(ex, "_processes", None) or {}).values()):
+                    proc.terminate()
+                raise
     else:
         for done, t in enumerate(tasks, 1):
             store(*_run(protocol, t), done)
