@@ -40,7 +40,7 @@ import numpy as np
 from ..pattern.layout import Layout
 from .boundaries import element_boundaries
 from .indexing import GridError, contact_graph, grid_labels, grid_labels_grown, orient, prune_triangles
-from .refine import symmetric_refine
+from .refine import refine_each_frame, symmetric_refine
 from .response import binarize, response_map
 from .rough import rough_corners
 
@@ -112,8 +112,7 @@ def frame_motion(frames: np.ndarray, corners: np.ndarray, window: np.ndarray, ok
     if len(idx) < 3:
         return 0.0
     idx = idx[np.linspace(0, len(idx) - 1, min(n_corners, len(idx))).astype(int)]
-    per = np.stack([symmetric_refine(f[None], corners[idx], window[idx], max_iter=15, tol=1e-3).corners
-                    for f in frames])  # (nf, n, 2)
+    per = refine_each_frame(frames, corners[idx], window[idx], max_iter=15, tol=1e-3).corners  # (nf, n, 2)
     spread = np.nanmax(np.linalg.norm(per - np.nanmedian(per, axis=0), axis=-1), axis=0)
     return float(np.nanmedian(spread))
 
