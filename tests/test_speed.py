@@ -25,7 +25,8 @@ def test_measure_speed_on_two_poses(d435_seq, tmp_path):
     assert r.command_s > 0 and r.startup_s >= 0
     assert r.ratio_with_startup >= r.ratio
     if shutil.which("mrgingham"):
-        assert r.mrgingham_s > 0 and r.vs_mrgingham == r.command_s / r.mrgingham_s
+        assert r.mrgingham_s > 0 and r.command_vs_mrgingham == r.command_s / r.mrgingham_s
+        assert np.isclose(r.vs_mrgingham, r.detect_with_startup_s / (r.mrgingham_s / 2))
     t = r.table()
     assert "detect / decode" in t and ("PASS" in t or "FAIL" in t)
     json.dumps(r.to_dict())
@@ -37,7 +38,8 @@ def test_speed_result_arithmetic():
     assert r.ratio == 2.0  # median of 1.5 and 2.5
     assert np.isclose(r.startup_s, 0.4)
     assert np.isclose(r.ratio_with_startup, 4.0)  # (0.15 + 0.2) / 0.1 and (0.25 + 0.2) / 0.1
-    assert r.vs_mrgingham == 0.25
+    assert r.command_vs_mrgingham == 0.25
+    assert np.isclose(r.vs_mrgingham, (0.2 + 0.2) / 2.0)  # median detect + start-up share, per mrgingham pose
     g = r.goals()
     assert not g["ratio"]["pass"] and g["mrgingham"]["pass"]
 
