@@ -20,7 +20,9 @@ the columns within max_dist only.
 between elements a and b: among its k nearest contour points (scipy's
 cKDTree.query(p, k)), is the nearest point of a third element more than
 `ratio` times farther than the nearest point of a or b? The k nearest are
-found shell by shell of equal distance on the pixel grid. Where the k-th and
+found shell by shell of equal distance on the pixel grid, stopping as soon as
+the answer is settled (the nearest point of a or b is known, and so is the
+nearest third point or every point left is too far to matter). Where the k-th and
 (k+1)-th nearest are equally far and the choice between them could change the
 answer (cKDTree keeps whichever it met first), the query is marked undecided
 and the caller asks cKDTree itself.
@@ -121,7 +123,7 @@ def knn_third_party(points: np.ndarray, owner: np.ndarray, p: np.ndarray, a: np.
     return keep, undecided
 
 
-def _knn_group(cnt_img, own_img, W, lo, base, aa, bb, half_axis, k, ratio, radius, block=48):
+def _knn_group(cnt_img, own_img, W, lo, base, aa, bb, half_axis, k, ratio, radius, block=12):
     """knn_third_party for queries half a pixel right of (or below) the grid points `base`"""
     Q = len(base)
     keep = np.zeros(Q, bool)
@@ -139,7 +141,7 @@ def _knn_group(cnt_img, own_img, W, lo, base, aa, bb, half_axis, k, ratio, radiu
     # blocks of whole shells
     cuts = [0]
     for st in np.r_[starts, len(off)]:
-        if st - cuts[-1] >= block:
+        if st - cuts[-1] >= block * len(cuts):  # blocks of growing size: most queries settle early
             cuts.append(int(st))
     if cuts[-1] != len(off):
         cuts.append(len(off))
@@ -190,5 +192,11 @@ def _knn_group(cnt_img, own_img, W, lo, base, aa, bb, half_axis, k, ratio, radiu
             q = active[h]
             keep[q] = val == 1
             undecided[q] = val == 3
-        active = active[~hit]
+        # settled early: the nearest of a or b is known, and so is the nearest third point or
+        # every point left is farther than ratio x that (then it cannot matter)
+        settled = ~hit & np.isfinite(da) & (np.isfinite(d3) | (dist[j1 - 1] >= ratio * da))
+        q = active[settled]
+        keep[q] = d3[settled] > ratio * da[settled]
+        undecided[q] = False
+        active = active[~hit & ~settled]
     return keep, undecided
