@@ -148,10 +148,10 @@ def _residuals(sampler, q, d, frame=None, shifts=None):
         vp, gxp, gyp = sampler(q[:, None, :] + d, frame)
         vm, gxm, gym = sampler(q[:, None, :] - d, frame)
     else:
-        c = (q[:, None, :] + shifts)[:, None]  # (N, 1, nf, 2)
+        s = shifts[:, None]  # (N, 1, nf, 2); points (q +- d) + s_k
         k = np.arange(shifts.shape[1])
-        vp, gxp, gyp = sampler(c + d[:, :, None, :], k)
-        vm, gxm, gym = sampler(c - d[:, :, None, :], k)
+        vp, gxp, gyp = sampler((q[:, None, :] + d)[:, :, None, :] + s, k)
+        vm, gxm, gym = sampler((q[:, None, :] - d)[:, :, None, :] + s, k)
     vp -= vm
     gxp -= gxm
     gyp -= gym
@@ -262,9 +262,10 @@ def _refine_group(sampler, nframes, q0, w, u, max_iter, tol, frame=None, shifts=
             return sampler.inside_box(q, dmin[i], dmax[i])
     else:
         def inside(q, i):
-            c = (q[:, None, :] + shifts[i])[:, None]  # (n, 1, nframes, 2), as _residuals samples
-            d = D[i][:, :, None, :]
-            return sampler.inside((c + d).reshape(len(q), -1, 2)) & sampler.inside((c - d).reshape(len(q), -1, 2))
+            s = shifts[i][:, None]  # (n, 1, nframes, 2); the points _residuals samples
+            p = (q[:, None, :] + D[i])[:, :, None, :] + s
+            m = (q[:, None, :] - D[i])[:, :, None, :] + s
+            return sampler.inside(p.reshape(len(q), -1, 2)) & sampler.inside(m.reshape(len(q), -1, 2))
 
     def residuals(q, i):
         return _residuals(sampler, q, D[i], None if frame is None else frame[i],
