@@ -99,6 +99,7 @@ import cv2
 import numpy as np
 
 from rotstar_mrcal import simulate
+from rotstar_mrcal.benchmark import speed
 from rotstar_mrcal.detect import baselines
 from rotstar_mrcal.detect.pipeline import detect_pose
 from rotstar_mrcal.pattern.layout import Layout, make_layout
@@ -776,6 +777,9 @@ def parse_args(argv=None):
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="processes for rendering only; detectors are always timed on one core (default: all cores)")
     p.add_argument("--out", default="bench-out", help="folder for bench.json, bench.md, error-cdf.png")
+    p.add_argument("--doc", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "doc", "benchmark.md"),
+                   help="rewrite the speed section (between <!-- speed:begin/end --> markers) of this file "
+                        "(default: doc/benchmark.md; '' for none)")
     p.add_argument("--memory-probe", nargs=2, metavar=("METHOD", "NPZ"), help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.quick:
@@ -804,6 +808,8 @@ def main(argv=None) -> int:
         run = detect_all(scene, poses, tmp, have_mrgingham)
         log("calibrating with mrcal from each method's boards")
         cal = calibrate_all(scene, run, tmp)
+        speed_md, speed_run = speed.bench_speed(os.path.join(tmp, "speed-seq"), scene.layout,
+                                                [(p.rotstar, p.checker) for p in poses], a.bits, log=log)
     results, memory = run["results"], run["memory"]
     sizes = {k: (scene.square if BY_KEY[k].square else scene.layout) for k in results}
     summary = {k: summarize(rows, sizes[k].nx * sizes[k].ny) for k, rows in results.items()}
@@ -823,6 +829,8 @@ def main(argv=None) -> int:
     print(cal_title)
     print()
     print(cal_tab)
+    print()
+    print(speed_md)
     sys.stdout.flush()
 
     os.makedirs(a.out, exist_ok=True)
@@ -836,7 +844,7 @@ def main(argv=None) -> int:
     md = "\n\n".join([
         "# rotstar-mrcal benchmark", setup, when, tab, gl, cal_title, cal_tab,
         "Poses a method did not get complete and right:\n\n" + failures(results),
-        notes(run, have_mrgingham),
+        notes(run, have_mrgingham), speed_md,
     ]) + "\n"
     with open(os.path.join(a.out, "bench.md"), "w") as f:
         f.write(md)
@@ -858,11 +866,14 @@ def main(argv=None) -> int:
                         "memory": memory.get(k), "per_pose": results[k]} for k in results},
         "goals": g,
         "calibration": {"lensmodel": CAL_LENSMODEL, "methods": cal},
+        "speed": speed_run,
     }
     with open(os.path.join(a.out, "bench.json"), "w") as f:
         json.dump(doc, f, indent=1)
         f.write("\n")
     plot_cdf(results, os.path.join(a.out, "error-cdf.png"))
+    if a.doc and speed.write_block(a.doc, "speed", f"{setup}.\n\n{when}.\n\n{speed_md}"):
+        log(f"wrote the speed section of {a.doc}")
     log(f"wrote {a.out}/bench.json, bench.md, error-cdf.png; wall time {wall:.0f} s")
     return 0
 

@@ -74,8 +74,7 @@ def contact_graph(contours: list, shape: tuple[int, int], lattice: np.ndarray | 
     (such as the paper's bounding-rectangle vertex distance) this holds
     under shear, steep perspective and blur.
     """
-    import scipy.ndimage as ndi
-    from scipy.spatial import cKDTree
+    from .nearest import knn_third_party, nearest_label  # scipy's EDT and k-d tree answers, without importing scipy
 
     N = len(contours)
     if N == 0:
@@ -88,11 +87,9 @@ def contact_graph(contours: list, shape: tuple[int, int], lattice: np.ndarray | 
     lab = np.zeros((y1 - y0, x1 - x0), np.int32)
     for k, c in enumerate(contours):
         cv2.drawContours(lab, [(c - (x0, y0)).astype(np.int32)[:, None, :]], 0, k + 1, thickness=-1)
-    dist, (iy, ix) = ndi.distance_transform_edt(lab == 0, return_indices=True)
-    vor = lab[iy, ix]
     area = np.array([max(cv2.contourArea(c.astype(np.float32)), 1.0) for c in contours])
     side = np.sqrt(area)
-    vor[dist > 0.75 * np.median(side)] = 0  # stay near the elements
+    vor = nearest_label(lab, 0.75 * np.median(side))  # the nearest element, if near: stay near the elements
     if lattice is not None:  # and inside the border lattice: no contact around the board's corners
         inside = np.zeros_like(lab, np.uint8)
         cv2.fillPoly(inside, [(np.asarray(lattice) - (x0, y0)).astype(np.int32)[:, None, :]], 1)
@@ -105,12 +102,18 @@ def contact_graph(contours: list, shape: tuple[int, int], lattice: np.ndarray | 
     p = np.concatenate((np.column_stack((xa + 0.5, ya)), np.column_stack((xb, yb + 0.5)))) + (x0, y0)
     if len(p):
         kk = min(24, len(allpts))
-        dd, ii = cKDTree(allpts).query(p, k=kk)
-        dd, ii = dd.reshape(len(p), kk), ii.reshape(len(p), kk)
-        own = owner[ii]
-        d_ab = np.where((own == a[:, None]) | (own == b[:, None]), dd, np.inf).min(axis=1)
-        d_3 = np.where((own != a[:, None]) & (own != b[:, None]), dd, np.inf).min(axis=1)
-        keep = d_3 > 1.25 * d_ab
+        keep, ask = knn_third_party(allpts, owner, p, a, b, k=kk) if kk == 24 else (None, np.ones(len(p), bool))
+        if ask.any():  # ties at the 24th distance that cKDTree's order decides
+            from scipy.spatial import cKDTree
+
+            q = np.flatnonzero(ask)
+            dd, ii = cKDTree(allpts).query(p[q], k=kk)
+            dd, ii = dd.reshape(len(q), kk), ii.reshape(len(q), kk)
+            own = owner[ii]
+            d_ab = np.where((own == a[q, None]) | (own == b[q, None]), dd, np.inf).min(axis=1)
+            d_3 = np.where((own != a[q, None]) & (own != b[q, None]), dd, np.inf).min(axis=1)
+            keep = np.zeros(len(p), bool) if keep is None else keep
+            keep[q] = d_3 > 1.25 * d_ab
         a, b = a[keep], b[keep]
     contact = np.zeros((N, N))
     np.add.at(contact, (a, b), 1)

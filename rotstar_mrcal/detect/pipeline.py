@@ -46,7 +46,7 @@ from .boundaries import element_boundaries
 from .display import FrameShifts, frame_shifts, grid_homography, homography_jacobian
 from .indexing import (GridError, contact_graph, frame_angles, grid_array, grid_labels, grid_labels_grown,
                        mirror_reason, order_reason, orient, prune_triangles)
-from .refine import symmetric_refine
+from .refine import refine_each_frame, symmetric_refine
 from .response import binarize, response_map
 from .rough import rough_corners
 from .sequence import check_band_parity
@@ -159,8 +159,7 @@ def per_frame_corners(frames: np.ndarray, corners: np.ndarray, window: np.ndarra
     """
     idx = np.flatnonzero(ok)
     idx = idx[np.unique(np.linspace(0, len(idx) - 1, min(n_corners, len(idx))).astype(int))] if len(idx) else idx
-    per = np.stack([symmetric_refine(f[None], corners[idx], window[idx], max_iter=15, tol=1e-3).corners
-                    for f in frames])
+    per = refine_each_frame(frames, corners[idx], window[idx], max_iter=15, tol=1e-3).corners  # (nf, n, 2)
     return idx, per
 
 

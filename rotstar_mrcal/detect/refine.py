@@ -25,6 +25,16 @@ after one that does not), until the accepted step is shorter than `tol`
 pixels. A corner is rejected if it moves more than w from its start, if a
 sample leaves the image, or if it does not converge.
 
+Two batch forms share that machinery: `shifts` samples frame k about q + s_k
+(a display that shows each frame displaced), and `refine_each_frame` refines
+every frame alone (the pipeline's motion check) as one batch of nframes x N
+problems, with the same numbers as one call per frame.
+
+The sampler gathers the four neighbours of every sample with np.take from a
+(pixels, frames) copy of the frames (all frames at once) or from the frames
+themselves (one frame per sample); whether a corner's samples stay inside the
+image is decided from the extremes of its offsets.
+
 A checker corner stays point-symmetric under perspective (its edges are lines
 through the corner, and lines map to lines), so translation alone is enough
 as long as the window stays inside the element; `window` may be given per
@@ -55,63 +65,97 @@ def unit_offsets(window: int, seed: int = 0, density: int = 4) -> np.ndarray:
 
 
 class _Sampler:
-    """Bilinear interpolation of all frames at once, and its gradient"""
+    """Bilinear interpolation of the frames, and its gradient
+
+    Two layouts of the same pixels: (H*W, nframes) rows, one gather per
+    neighbour for all frames at once (built on first use), and the frames as
+    given, for samples that each read one frame.
+    """
 
     def __init__(self, frames: np.ndarray):
-        nf, self.H, self.W = frames.shape
-        self.F = np.ascontiguousarray(np.moveaxis(np.asarray(frames, np.float32), 0, -1).reshape(-1, nf))
+        self.nf, self.H, self.W = frames.shape
+        self.frames = np.ascontiguousarray(frames, np.float32)
+        self._rows = None
+
+    @property
+    def rows(self) -> np.ndarray:
+        if self._rows is None:
+            self._rows = np.ascontiguousarray(np.moveaxis(self.frames, 0, -1).reshape(-1, self.nf))
+        return self._rows
 
     def inside(self, p: np.ndarray) -> np.ndarray:
         """(N,) True where every point of a corner's (N, S, 2) set is interpolable"""
         x, y = p[..., 0], p[..., 1]
         return ((x >= 0) & (x <= self.W - 1.001) & (y >= 0) & (y <= self.H - 1.001)).all(axis=-1)
 
-    def __call__(self, p: np.ndarray):
-        """Values (N, S, nf) and gradients d/dx, d/dy (N, S, nf) at points p (N, S, 2)"""
+    def inside_box(self, q: np.ndarray, dmin: np.ndarray, dmax: np.ndarray) -> np.ndarray:
+        """inside(q + D) & inside(q - D) from the per-corner extremes of D (N, 2)
+
+        The same answer without forming the points: rounding is monotonic, so
+        the smallest of q + d is q + min(d) and the largest q + max(d).
+        """
+        lim = (self.W - 1.001, self.H - 1.001)
+        return ((q + dmin >= 0) & (q + dmax <= lim) & (q - dmax >= 0) & (q - dmin <= lim)).all(axis=-1)
+
+    def __call__(self, p: np.ndarray, frame: np.ndarray | None = None):
+        """Values, d/dx and d/dy at points p (..., 2)
+
+        frame None: every frame, arrays (..., nframes). Otherwise an integer
+        array broadcastable to p[..., 0]: each point reads its own frame,
+        arrays of p[..., 0]'s shape.
+        """
         x = np.clip(p[..., 0], 0, self.W - 1.001)
         y = np.clip(p[..., 1], 0, self.H - 1.001)
         x0 = np.floor(x)
         y0 = np.floor(y)
-        fx = (x - x0).astype(np.float32)[..., None]
-        fy = (y - y0).astype(np.float32)[..., None]
-        i = (y0.astype(np.int64) * self.W + x0.astype(np.int64))
-        a = self.F[i]
-        b = self.F[i + 1]
-        c = self.F[i + self.W]
-        d = self.F[i + self.W + 1]
-        top = a + fx * (b - a)
-        bot = c + fx * (d - c)
-        val = top + fy * (bot - top)
-        gx = (b - a) + fy * ((d - c) - (b - a))
-        gy = bot - top
-        return val, gx, gy
+        fx = (x - x0).astype(np.float32)
+        fy = (y - y0).astype(np.float32)
+        i = y0.astype(np.intp)
+        i *= self.W
+        i += x0.astype(np.intp)
+        if frame is None:
+            F = self.rows
+            fx, fy = fx[..., None], fy[..., None]
+        else:
+            F = self.frames.reshape(-1)
+            i = i + np.asarray(frame, np.intp) * (self.H * self.W)
+        a = np.take(F, i, axis=0)
+        b = np.take(F, i + 1, axis=0)
+        i += self.W
+        c = np.take(F, i, axis=0)
+        d = np.take(F, i + 1, axis=0)
+        b -= a  # b - a
+        d -= c  # d - c
+        top = fx * b
+        top += a
+        bot = fx * d
+        bot += c
+        bot -= top  # d/dy
+        val = fy * bot
+        val += top
+        d -= b
+        d *= fy
+        d += b  # d/dx
+        return val, d, bot
 
-    def shifted(self, p: np.ndarray, shifts: np.ndarray):
-        """As __call__, but frame k is sampled at p + shifts[:, k] (shifts (N, nf, 2))"""
-        out = [np.empty(p.shape[:-1] + (shifts.shape[1],), np.float32) for _ in range(3)]
-        for k in range(shifts.shape[1]):
-            pk = p + shifts[:, None, k, :]
-            F = self.F
-            self.F = F[:, k : k + 1]
-            try:
-                for o, v in zip(out, self(pk)):
-                    o[..., k] = v[..., 0]
-            finally:
-                self.F = F
-        return tuple(out)
 
+def _residuals(sampler, q, d, frame=None, shifts=None):
+    """Residuals (N, S * nf) and their derivatives by the corner's x and y
 
-def _residuals(sampler, q, d, sh=None):
-    if sh is None:
-        vp, gxp, gyp = sampler(q[:, None, :] + d)
-        vm, gxm, gym = sampler(q[:, None, :] - d)
+    shifts (N, nf, 2): frame k of corner i is sampled about q_i + shifts[i, k].
+    """
+    if shifts is None:
+        vp, gxp, gyp = sampler(q[:, None, :] + d, frame)
+        vm, gxm, gym = sampler(q[:, None, :] - d, frame)
     else:
-        vp, gxp, gyp = sampler.shifted(q[:, None, :] + d, sh)
-        vm, gxm, gym = sampler.shifted(q[:, None, :] - d, sh)
-    r = (vp - vm).reshape(len(q), -1)
-    jx = (gxp - gxm).reshape(len(q), -1)
-    jy = (gyp - gym).reshape(len(q), -1)
-    return r, jx, jy
+        s = shifts[:, None]  # (N, 1, nf, 2); points (q +- d) + s_k
+        k = np.arange(shifts.shape[1])
+        vp, gxp, gyp = sampler((q[:, None, :] + d)[:, :, None, :] + s, k)
+        vm, gxm, gym = sampler((q[:, None, :] - d)[:, :, None, :] + s, k)
+    vp -= vm
+    gxp -= gxm
+    gyp -= gym
+    return vp.reshape(len(q), -1), gxp.reshape(len(q), -1), gyp.reshape(len(q), -1)
 
 
 def _normal(r, jx, jy):
@@ -137,50 +181,100 @@ def symmetric_refine(
     """Refine corners (N, 2) on frames (nframes, H, W) by Eq. 1; see the module doc
 
     Corners are processed in groups of equal ceil(window), each corner with
-    density * (2 ceil(w) + 1)^2 samples. shifts: optional (nframes, N, 2)
-    image offsets of each frame's copy of each corner (a display that shows
-    frames displaced): frame k is then sampled symmetrically about
-    q + shifts[k], and q is returned.
+    density * (2 ceil(w) + 1)^2 samples.
+
+    shifts: optional (nframes, N, 2) image offsets; frame k's samples for
+    corner i are then taken about q_i + shifts[k, i], i.e. the cost is
+    sum_k sum_d [I_k(q + s_k + d) - I_k(q + s_k - d)]^2, and the corner
+    returned is q (for frames that show the pattern displaced).
     """
     frames = np.asarray(frames, np.float32)
     if frames.ndim == 2:
         frames = frames[None]
     q0 = np.asarray(corners0, float).reshape(-1, 2)
     N = len(q0)
+    if shifts is not None:
+        shifts = np.asarray(shifts, float)
+        if shifts.shape != (len(frames), N, 2):
+            raise ValueError(f"shifts must be (nframes, N, 2) = {(len(frames), N, 2)}, not {shifts.shape}")
+        shifts = np.ascontiguousarray(shifts.transpose(1, 0, 2))  # (N, nframes, 2)
+    return _refine(_Sampler(frames), frames.shape[0], q0, window, density, max_iter, tol, seed, shifts=shifts)
+
+
+def refine_each_frame(
+    frames: np.ndarray,
+    corners0: np.ndarray,
+    window: float | np.ndarray = 10,
+    density: int = 4,
+    max_iter: int = 50,
+    tol: float = 1e-3,
+    seed: int = 0,
+) -> Refined:
+    """symmetric_refine on every frame alone: a Refined whose arrays have a leading frame axis
+
+    The same numbers as [symmetric_refine(f[None], corners0, window, ...) for f
+    in frames], computed as one batch of nframes x N problems (each sample
+    reads only its own problem's frame).
+    """
+    frames = np.asarray(frames, np.float32)
+    if frames.ndim == 2:
+        frames = frames[None]
+    nf = len(frames)
+    q0 = np.asarray(corners0, float).reshape(-1, 2)
+    N = len(q0)
+    w = np.broadcast_to(np.asarray(window, float), (N,))
+    r = _refine(_Sampler(frames), 1, np.tile(q0, (nf, 1)), np.tile(w, nf), density, max_iter, tol, seed,
+                frame=np.repeat(np.arange(nf), N))
+    return Refined(r.corners.reshape(nf, N, 2), r.ok.reshape(nf, N), r.reason.reshape(nf, N),
+                   r.sigma.reshape(nf, N), r.cov.reshape(nf, N, 2, 2), r.iterations)
+
+
+def _refine(sampler, nframes, q0, window, density, max_iter, tol, seed, frame=None, shifts=None) -> Refined:
+    """Every corner, in groups of equal ceil(window); frame: (N,) one frame per corner, or None"""
+    N = len(q0)
     w = np.broadcast_to(np.asarray(window, float), (N,)).copy()
-    sampler = _Sampler(frames)
-    sh = None if shifts is None else np.moveaxis(np.asarray(shifts, float).reshape(frames.shape[0], N, 2), 0, 1)
     out = Refined(np.full((N, 2), np.nan), np.zeros(N, bool), np.full(N, "", dtype=object),
                   np.full(N, np.nan), np.full((N, 2, 2), np.nan), 0)
     wc = np.ceil(np.maximum(w, 1)).astype(int)
     for g in np.unique(wc):
         sel = np.flatnonzero(wc == g)
-        r = _refine_group(sampler, frames.shape[0], q0[sel], w[sel], unit_offsets(g, seed, density), max_iter, tol,
-                          None if sh is None else sh[sel])
+        r = _refine_group(sampler, nframes, q0[sel], w[sel], unit_offsets(g, seed, density), max_iter, tol,
+                          None if frame is None else frame[sel, None],
+                          None if shifts is None else shifts[sel])
         out.corners[sel], out.ok[sel], out.reason[sel] = r.corners, r.ok, r.reason
         out.sigma[sel], out.cov[sel] = r.sigma, r.cov
         out.iterations = max(out.iterations, r.iterations)
     return out
 
 
-def _inside(sampler, q, D, sh):
-    """(N,) True where every sample q + s_k +- d of every frame k lies inside the image"""
-    if sh is None:
-        return sampler.inside(q[:, None, :] + D) & sampler.inside(q[:, None, :] - D)
-    N = len(q)
-    c = q[:, None, None, :] + sh[:, None, :, :]  # (N, 1, nf, 2)
-    return (sampler.inside((c + D[:, :, None, :]).reshape(N, -1, 2))
-            & sampler.inside((c - D[:, :, None, :]).reshape(N, -1, 2)))
+def _refine_group(sampler, nframes, q0, w, u, max_iter, tol, frame=None, shifts=None) -> Refined:
+    """Levenberg-Marquardt on corners that share one set of unit offsets u
 
-
-def _refine_group(sampler, nframes, q0, w, u, max_iter, tol, sh=None) -> Refined:
+    frame: (N, 1) the frame each corner reads, or None (all frames);
+    shifts: (N, nframes, 2) per-frame offsets of the sampling centre, or None.
+    """
     N = len(q0)
     D = (w[:, None, None] * u[None]).astype(np.float64)  # (N, S, 2)
+    if shifts is None:
+        dmin, dmax = D.min(axis=1), D.max(axis=1)
+
+        def inside(q, i):
+            return sampler.inside_box(q, dmin[i], dmax[i])
+    else:
+        def inside(q, i):
+            s = shifts[i][:, None]  # (n, 1, nframes, 2); the points _residuals samples
+            p = (q[:, None, :] + D[i])[:, :, None, :] + s
+            m = (q[:, None, :] - D[i])[:, :, None, :] + s
+            return sampler.inside(p.reshape(len(q), -1, 2)) & sampler.inside(m.reshape(len(q), -1, 2))
+
+    def residuals(q, i):
+        return _residuals(sampler, q, D[i], None if frame is None else frame[i],
+                          None if shifts is None else shifts[i])
 
     q = q0.copy()
     reason = np.full(N, "", dtype=object)
     ok = np.ones(N, bool)
-    bad = ~_inside(sampler, q, D, sh) | ~np.isfinite(q).all(axis=1)
+    bad = ~inside(q, slice(None)) | ~np.isfinite(q).all(axis=1)
     reason[bad] = "window leaves the image"
     ok &= ~bad
     active = ok.copy()
@@ -189,7 +283,7 @@ def _refine_group(sampler, nframes, q0, w, u, max_iter, tol, sh=None) -> Refined
     cost = np.full(N, np.inf)
     idx = np.flatnonzero(active)
     if len(idx):
-        JtJ[idx], Jtr[idx], cost[idx] = _normal(*_residuals(sampler, q[idx], D[idx], None if sh is None else sh[idx]))
+        JtJ[idx], Jtr[idx], cost[idx] = _normal(*residuals(q[idx], idx))
     lam = 1e-3 * np.trace(JtJ, axis1=1, axis2=2) + 1e-12
     converged = np.zeros(N, bool)
     it = 0
@@ -200,11 +294,9 @@ def _refine_group(sampler, nframes, q0, w, u, max_iter, tol, sh=None) -> Refined
         A = JtJ[idx] + lam[idx, None, None] * np.eye(2)
         step = -np.linalg.solve(A, Jtr[idx][..., None])[..., 0]
         qn = q[idx] + step
-        shi = None if sh is None else sh[idx]
-        inside = _inside(sampler, qn, D[idx], shi)
-        r, jx, jy = _residuals(sampler, qn, D[idx], shi)
-        JtJn, Jtrn, costn = _normal(r, jx, jy)
-        acc = (costn <= cost[idx]) & inside
+        ins = inside(qn, idx)
+        JtJn, Jtrn, costn = _normal(*residuals(qn, idx))
+        acc = (costn <= cost[idx]) & ins
         a = idx[acc]
         q[a], JtJ[a], Jtr[a], cost[a] = qn[acc], JtJn[acc], Jtrn[acc], costn[acc]
         lam[a] /= 3
@@ -212,7 +304,7 @@ def _refine_group(sampler, nframes, q0, w, u, max_iter, tol, sh=None) -> Refined
         small = np.linalg.norm(step, axis=1) < tol
         done = (acc & small) | (~acc & (lam[idx] > 1e8 * np.trace(JtJ[idx], axis1=1, axis2=2) + 1e-6))
         converged[idx[done]] = True
-        left = ~inside & ~acc
+        left = ~ins & ~acc
         reason[idx[left]] = "window leaves the image"
         ok[idx[left]] = False
         active[idx[done | left]] = False

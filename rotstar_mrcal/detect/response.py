@@ -34,7 +34,13 @@ FLOOR_FRACTION = 1 / 20
 
 def intensity_estimate(frames: np.ndarray) -> np.ndarray:
     """Per-pixel maximum over frames, floored at 1/20 of the global maximum"""
-    m = frames.max(axis=0)
+    m = frames[0].copy()
+    for f in frames[1:]:
+        cv2.max(m, f, dst=m)  # the same maximum as frames.max(axis=0), without numpy's strided reduction
+    return _floor(m)
+
+
+def _floor(m: np.ndarray) -> np.ndarray:
     return np.maximum(m, FLOOR_FRACTION * float(m.max()) + 1e-12)
 
 
@@ -45,14 +51,30 @@ def response_map(frames: np.ndarray, smooth_sigma: float = 1.0) -> np.ndarray:
     is smoothed by a Gaussian of smooth_sigma px first: noise in dark regions,
     divided by the floored intensity estimate, would otherwise reach the level
     of the bands (the response only needs to find the bands, a few px wide).
+    One smoothed frame at a time (two buffers), with OpenCV's element-wise
+    operations: the same numbers as smoothing the whole stack first.
     """
     f = np.asarray(frames, np.float32)
-    if smooth_sigma > 0:
-        f = np.stack([cv2.GaussianBlur(k, (0, 0), smooth_sigma) for k in f])
     acc = np.zeros(f.shape[1:], np.float32)
-    for a, b in zip(f[:-1], f[1:]):
-        acc += cv2.absdiff(b, a)
-    return acc / intensity_estimate(f)
+    if len(f) == 0:
+        return acc
+    prev, cur = np.empty_like(acc), np.empty_like(acc)
+    diff = np.empty_like(acc)
+
+    def smoothed(k, dst):
+        if smooth_sigma > 0:
+            return cv2.GaussianBlur(f[k], (0, 0), smooth_sigma, dst=dst)
+        return f[k]
+
+    prev = smoothed(0, prev)
+    m = prev.copy()
+    for k in range(1, len(f)):
+        cur = smoothed(k, cur)
+        cv2.absdiff(cur, prev, dst=diff)
+        acc += diff
+        cv2.max(m, cur, dst=m)
+        prev, cur = cur, prev
+    return acc / _floor(m)
 
 
 def mean_threshold(values: np.ndarray, bins: int = 1024, max_iter: int = 100) -> float:
