@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from rotstar_mrcal import dataset, simulate
-from rotstar_mrcal.cli.calibrate import calibration_argv
+from rotstar_mrcal.validate.calibrate import calibration_argv
 from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.simulate.dataset import Truth, write_truth
 from rotstar_mrcal.validate import calibrate as cal

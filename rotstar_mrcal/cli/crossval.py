@@ -7,16 +7,18 @@ import concurrent.futures as cf
 import json
 import os
 import sys
+import tempfile
 
 import numpy as np
 
 from .. import dataset
-from ..vnl import write_corners
 from ..validate import calibrate as cal
 from ..validate import compare, plots, report
-from ..validate.cornersets import DESCRIPTIONS, METHODS, detect_methods
-from ..validate.sources import SourceError, load_corner_set
-from .calibrate import calibration_argv, focal_seed, resolve_lensmodel
+from ..validate.calibrate import calibration_argv, focal_seed, resolve_lensmodel
+from ..validate.cornersets import DESCRIPTIONS, METHODS
+from ..validate.detection import detect_dataset as _detect_dataset
+from ..validate.detection import split_interleaved
+from ..validate.sources import SourceError, load_corner_set, load_model
 from .common import Progress, say
 
 DESCRIPTION = """\
@@ -32,6 +34,11 @@ Validate calibrations the way the rotating-star paper and mrcal do it.
       projection difference over the imager against the sum of their
       projection uncertainties (both need mrcal's optimization_inputs).
 
+  rotstar-crossval SEQ --outdir DIR
+      One recording (a dataset or a corners.vnl): its boards split into two
+      interleaved groups (A: boards 0, 2, 4, ...; B: 1, 3, 5, ..., written
+      as DIR/rotstar/A.vnl and B.vnl), then as for A B below.
+
   rotstar-crossval A B  [--methods ...] [--set NAME A_VNL B_VNL ...]
       Two pose groups of one camera (datasets or corners.vnl files):
       calibrate each, test each model on the other group (both directions),
@@ -43,6 +50,13 @@ Commands are printed on stderr before they run. stdout gets the results
 table (Markdown) or, with --json, the results. With --outdir, the models,
 the figures (PNG) and results.json are written there; rotstar-report turns
 one or more such folders into a report.
+
+The lens model defaults to rotstar-calibrate's lean model
+(LENSMODEL_OPENCV8, the model of rotstar-detect's printed command).
+
+Exit status: 0 done; 1 some corner set could not be calibrated (the others
+are reported); 2 bad arguments or inputs (a missing or unreadable model, a
+model of another imager size than the test corners).
 """
 
 EPILOG = f"""\
@@ -50,6 +64,7 @@ methods for --methods: {', '.join(METHODS)} (or 'all')
 
 examples:
   rotstar-crossval cal/camera-0.cameramodel test-seq/
+  rotstar-crossval seq/ --outdir xval/                    # one recording, split in two
   rotstar-crossval groupA/ groupB/ --lensmodel opencv8 --outdir xval/
   rotstar-crossval groupA/ groupB/ --methods all --outdir xval/ --label "4000 us"
   rotstar-crossval --set rotstar A/rotstar.vnl B/rotstar.vnl --set mrgingham A/mrg.vnl B/mrg.vnl
@@ -59,14 +74,16 @@ examples:
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-crossval", description=DESCRIPTION, epilog=EPILOG,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("inputs", nargs="*", help="MODEL TEST, MODEL_A MODEL_B, or A B (datasets or corners.vnl)")
+    p.add_argument("inputs", nargs="*", help="MODEL TEST, MODEL_A MODEL_B, SEQ, or A B (datasets or corners.vnl)")
     p.add_argument("--set", nargs=3, action="append", default=[], metavar=("NAME", "A", "B"),
                    help="a named corner set of both groups (corners.vnl files); repeatable")
     p.add_argument("--methods", help="detect these methods on the datasets A and B (comma-separated, or 'all')")
-    p.add_argument("--outdir", help="write models, figures and results.json here (required for A B)")
+    p.add_argument("--outdir", help="write models, figures and results.json here (required for A B and SEQ; "
+                   "MODEL TEST keeps the detected corners here, else in a temporary folder)")
     p.add_argument("--label", help="name of this condition in the tables (e.g. the exposure)")
-    p.add_argument("--lensmodel", default="splined",
-                   help="lens model of the calibrations: 'splined' (default), 'opencv8' or LENSMODEL_...")
+    p.add_argument("--lensmodel", default="auto",
+                   help=f"lens model of the calibrations: 'auto' (default: {cal.LEAN_LENSMODEL}, rotstar-calibrate's "
+                        "lean model), 'splined', 'opencv5', ... or LENSMODEL_...")
     p.add_argument("--knots-x", type=int, default=cal.DEFAULT_KNOTS_X, help="splined model: knots across")
     p.add_argument("--pattern", help="pattern.json (or its folder) when a corners.vnl's dataset cannot be found")
     p.add_argument("--imagersize", type=int, nargs=2, metavar=("W", "H"),
@@ -94,88 +111,48 @@ def _write_json(obj, path=None):
     if path is None:
         sys.stdout.write(text)
     else:
-        with open(path, "w") as f:
+        with open(path + ".tmp", "w") as f:
             f.write(text)
-
-
-# ---------------------------------------------------------------------------
-# detection of datasets
-# ---------------------------------------------------------------------------
-def _detect_pose(seq, pose, layout, methods):
-    p = dataset.load_pose(seq, pose, layout)
-    cb = p.checkerboard
-    found = detect_methods(p.rotstar, layout, p.full_scale, cb, methods)
-    cbfile = os.path.join(seq, pose, next(f["file"] for f in layout.frames() if f["kind"] == "checkerboard"))
-    return pose, p.first_file, cbfile, found
+        os.replace(path + ".tmp", path)
 
 
 def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1) -> dict[str, str]:
-    """Detect every method on a dataset; write outdir/<method>/<side>.vnl; {method: vnl}"""
-    _, layout = dataset.read_pattern(seq)
-    poses = dataset.list_poses(seq)
-    if not poses:
-        raise SourceError(f"{seq}: no pose folders")
-    say(f"rotstar-crossval: detecting {', '.join(methods)} on {seq} ({len(poses)} poses)")
-    progress = Progress(len(poses))
-    res = {}
-    if jobs > 1:
-        with cf.ProcessPoolExecutor(jobs) as ex:
-            futs = [ex.submit(_detect_pose, seq, p, layout, methods) for p in poses]
-            for f in cf.as_completed(futs):
-                r = f.result()
-                res[r[0]] = r
-                progress.step(r[0], ", ".join(f"{m} {'ok' if v.corners is not None else 'none'}"
-                                              for m, v in r[3].items()))
-    else:
-        for p in poses:
-            r = _detect_pose(seq, p, layout, methods)
-            res[p] = r
-            progress.step(p, ", ".join(f"{m} {'ok' if v.corners is not None else 'none'}" for m, v in r[3].items()))
-    out = {}
-    for m in methods:
-        boards, weights = [], []
-        for p in poses:
-            _, rfile, cbfile, found = res[p]
-            fn = rfile if m.startswith("rotstar") else cbfile
-            boards.append((fn, found[m].corners))
-            weights.append(found[m].weights)
-        path = os.path.join(outdir, m, f"{side}.vnl")
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-        with open(path, "w") as f:
-            write_corners(f, boards, weights if m == "rotstar-weighted" else None)
-        out[m] = path
-    return out
-
-
-def load_model(path: str, need_inputs: bool = False):
-    """mrcal.cameramodel(path), or a SourceError naming the file and the reason in one line"""
-    import mrcal
-
-    try:
-        m = mrcal.cameramodel(path)
-    except Exception:  # mrcal raises a plain Exception listing every parser's complaint
-        raise SourceError(f"{path}: not a camera model mrcal can parse") from None
-    if need_inputs and not m.optimization_inputs():
-        raise SourceError(f"{path}: has no optimization_inputs (needed for the uncertainty); "
-                          "use a model written by mrcal-calibrate-cameras")
-    return m
+    """validate.detection.detect_dataset with progress lines on stderr"""
+    n = len(dataset.list_poses(seq))
+    say(f"rotstar-crossval: detecting {', '.join(methods)} on {seq} ({n} poses)")
+    progress = Progress(n)
+    return _detect_dataset(seq, methods, outdir, side, jobs, progress=progress.step)
 
 
 # ---------------------------------------------------------------------------
 # modes
 # ---------------------------------------------------------------------------
 def mode_heldout(a, model_path: str, test: str) -> int:
-    from ..validate.heldout import heldout
-
     model = load_model(model_path)
+    tmp = None
     if _kind(test) == "dataset":
-        outdir = a.outdir or "."
-        vnl = detect_dataset(test, ["rotstar"], outdir, "test", a.jobs)["rotstar"]
+        if a.outdir is None:
+            tmp = tempfile.TemporaryDirectory(prefix="rotstar-crossval-")
+        vnl = detect_dataset(test, ["rotstar"], a.outdir or tmp.name, "test", a.jobs)["rotstar"]
     else:
         vnl = test
+    try:
+        return _heldout_report(a, model, model_path, test, vnl)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+
+
+def _heldout_report(a, model, model_path, test, vnl) -> int:
+    from ..validate.heldout import heldout
+
     cs = load_corner_set(vnl, a.pattern, a.imagersize, truth=False)
-    if tuple(model.imagersize()) != tuple(cs.imagersize):
-        say(f"rotstar-crossval: warning: model imager {tuple(model.imagersize())} != test {cs.imagersize}")
+    if tuple(int(v) for v in model.imagersize()) != tuple(cs.imagersize):
+        W, H = (int(v) for v in model.imagersize())
+        raise SourceError(f"{model_path} is a {W}x{H} camera, the test corners are of "
+                          f"{cs.imagersize[0]}x{cs.imagersize[1]} images: not the same camera")
+    if not a.outdir and os.path.isdir(test):
+        vnl = f"{test} (detected, not kept: give --outdir to keep the corners)"
     warp = model.optimization_inputs().get("calobject_warp") if model.optimization_inputs() else None
     h = heldout(model, cs.corners, cs.layout.spacing_m, calobject_warp=warp)
     if a.json:
@@ -263,7 +240,7 @@ def mode_sets(a, sets: dict) -> int:
     if not loaded:
         raise SourceError("no corner set could be read")
     first = next(iter(loaded.values()))[0]
-    lensmodel = resolve_lensmodel(a.lensmodel, first.imagersize, focal_seed(first), a.knots_x)
+    lensmodel = resolve_lensmodel(a.lensmodel, first.imagersize, focal_seed(first, check=False), a.knots_x)
     if "SPLINED" in lensmodel and min(len(c.files) for p in loaded.values() for c in p) < cal.SPLINED_MIN_BOARDS:
         say(f"rotstar-crossval: warning: fewer than {cal.SPLINED_MIN_BOARDS} boards in a group for a splined "
             "model; consider --lensmodel opencv8")
@@ -364,6 +341,16 @@ def mode_sets(a, sets: dict) -> int:
     return 0 if len(failed) < len(sets) else 1  # a set that cannot be calibrated is a result too
 
 
+def _outdir_error(path: str) -> str | None:
+    try:
+        os.makedirs(path, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        return f"--outdir {path}: a file is in the way (not a folder)"
+    except OSError as e:
+        return f"--outdir {path}: {e.strerror}"
+    return None
+
+
 def main(argv=None) -> int:
     a = parse_args(argv)
     try:
@@ -372,13 +359,28 @@ def main(argv=None) -> int:
             return mode_heldout(a, *a.inputs)
         if len(a.inputs) == 2 and kinds == ["model", "model"]:
             return mode_models(a, *a.inputs)
-        if len(a.inputs) not in (0, 2) or "model" in kinds or (not a.inputs and not a.set):
-            say("rotstar-crossval: give MODEL TEST, MODEL_A MODEL_B, A B, or --set NAME A B (see --help)")
+        if len(a.inputs) not in (0, 1, 2) or "model" in kinds or (not a.inputs and not a.set):
+            say("rotstar-crossval: give MODEL TEST, MODEL_A MODEL_B, SEQ, A B, or --set NAME A B (see --help)")
             return 2
         if not a.outdir:
             say("rotstar-crossval: comparing two groups needs --outdir for the models and figures")
             return 2
+        err = _outdir_error(a.outdir)
+        if err:
+            say(f"rotstar-crossval: {err}")
+            return 2
         sets = {}
+        if len(a.inputs) == 1:
+            if a.methods:
+                say("rotstar-crossval: --methods needs two dataset folders")
+                return 2
+            vnl = (detect_dataset(a.inputs[0], ["rotstar"], a.outdir, "all", a.jobs)["rotstar"]
+                   if kinds[0] == "dataset" else a.inputs[0])
+            va, vb = (os.path.join(a.outdir, "rotstar", f"{s}.vnl") for s in "AB")
+            na, nb = split_interleaved(vnl, va, vb)
+            say(f"rotstar-crossval: split {vnl} into {va} ({na} boards) and {vb} ({nb} boards), interleaved")
+            a.inputs = []
+            sets["rotstar"] = (va, vb)
         if a.inputs:
             if a.methods:
                 if kinds != ["dataset", "dataset"]:
