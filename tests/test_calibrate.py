@@ -158,3 +158,33 @@ def test_bad_dataset(run_cli, tmp_path):
 def test_detection_hint_is_not_repeated(calibrated):
     r, _ = calibrated  # rotstar-calibrate runs the calibration itself: no "next, calibrate with" advice
     assert "next, calibrate with" not in r.stderr
+
+
+def test_mrcal_show_tools_draw_our_calibration(calibrated, tmp_path):
+    """Every mrcal-show-* tool of doc/uncertainty.md, with --hardcopy, on models this project made"""
+    from rotstar_mrcal.validate.mrcalshow import draw, gnuplot_env, reads_png, show_commands
+
+    _, out = calibrated
+    model = str(out / "camera-0.cameramodel")
+    # a second calibration of the same camera for the diff, and a splined one for its correction
+    vnl = corner_dataset(str(tmp_path / "d"), 12, seed=3, sigma=0.01)
+    cs = load_corner_set(vnl)
+    spl = cal.run_calibration(cal.calibration_argv(cs, str(tmp_path / "spl"), cal.recommended_lensmodel(
+        cs.imagersize, 640)), in_process=True)
+    assert spl.intrinsics()[0].startswith("LENSMODEL_SPLINED")
+    figs = show_commands(model, str(tmp_path / "figs"), other=str(tmp_path / "spl" / "camera-0.cameramodel"),
+                         image_root=os.getcwd())
+    figs += [f for f in show_commands(str(tmp_path / "spl" / "camera-0.cameramodel"), str(tmp_path / "figs"),
+                                      prefix="spl-") if f.name == "splined-correction"]
+    names = {f.name for f in figs}
+    assert names == {"uncertainty", "residuals-worst", "residuals-directions", "residuals-histogram", "distortion",
+                     "valid-region", "diff", "splined-correction"}
+    unc = next(f for f in figs if f.name == "uncertainty")
+    assert "--observations" in unc.argv and float(unc.argv[unc.argv.index("--cbmax") + 1]) <= 0.2  # not mrcal's 3 px
+    draw(figs)
+    for f in figs:
+        assert os.path.getsize(f.png) > 1000 and open(f.png, "rb").read(8) == b"\x89PNG\r\n\x1a\n", f.name
+    worst = next(f for f in figs if f.name == "residuals-worst")
+    assert reads_png(next(p for p in [os.path.join(d, "gnuplot") for d in gnuplot_env()["PATH"].split(os.pathsep)]
+                          if os.path.exists(p)))
+    assert "Couldn't read image" not in worst.log and "cannot read" not in worst.log, worst.log  # with its image
