@@ -42,6 +42,12 @@ def test_report_builds_from_a_small_simulated_run(run_cli, tmp_path):
     assert md.startswith("# small run") and "## exposure 1" in md and "## exposure 2" in md
     for img in re.findall(r"!\[[^]]*\]\(([^)]+)\)", md) + re.findall(r"src='([^']+)'", (out / "index.html").read_text()):
         assert os.path.exists(out / img), img  # every figure the pages show is in the folder
+    # mrcal's own views of the first method's calibration, each with the command that redraws it
+    for tool in ("projection-uncertainty --observations", "residuals-board-observation", "residuals --histogram",
+                 "projection-diff", "valid-intrinsics-region", "distortion-off-pinhole"):
+        assert f"Redraw: `mrcal-show-{tool}" in md and f"redraw with: mrcal-show-{tool}" in r.stderr, tool
+    assert "--cbmax 3 " not in md and "outliers" in md
+    assert os.path.getsize(out / "exposure-1" / "mrcal-sharp-uncertainty.png") > 1000
     # the headline on stdout: both methods, the sharp corners win everywhere and say so
     assert r.stdout == (out / "headline.md").read_text()
     rows = {line.split("|")[1].strip(): line for line in r.stdout.splitlines() if line.startswith("| ")}

@@ -19,8 +19,15 @@ the order given). Writes OUT/index.md and OUT/index.html (the same page),
 OUT/headline.md, OUT/results.json (all conditions) and the figures: the
 summary bar charts, and each condition's per-pose plot and maps, copied.
 
+Per condition it also draws mrcal's own views of the first method's
+calibration on group A (mrcal-show-projection-uncertainty, -residuals,
+-residuals-board-observation, -distortion-off-pinhole,
+-valid-intrinsics-region, and -projection-diff against group B's), with
+colour scales that fit the data, the outlier count and the valid region;
+each with the mrcal-show-* command that redraws it (stderr and the page).
+
 stdout: the headline table and the verdict (Markdown), for pasting;
-stderr: the files written.
+stderr: the files written and the mrcal-show-* commands.
 """
 
 
@@ -33,6 +40,7 @@ def parse_args(argv=None):
     p.add_argument("--notes", help="a Markdown file whose text goes under the title (the set-up)")
     p.add_argument("--figure", action="append", default=[], metavar="PNG[:CAPTION]",
                    help="an extra figure to show after the headline; repeatable")
+    p.add_argument("--no-mrcal-figures", action="store_true", help="leave out mrcal's own views (faster)")
     return p.parse_args(argv)
 
 
@@ -65,7 +73,8 @@ def _copy(src_dir: str, rel: str, out: str, dst_rel: str) -> str | None:
     return dst_rel
 
 
-def build(results, dirs, out: str, title: str, notes: str = "", extra_figures=()) -> dict:
+def build(results, dirs, out: str, title: str, notes: str = "", extra_figures=(), mrcal_figures: bool = True,
+          log=None) -> dict:
     """Write the report folder; returns {'index.md': path, ...}"""
     import matplotlib.pyplot as plt
 
@@ -122,6 +131,8 @@ def build(results, dirs, out: str, title: str, notes: str = "", extra_figures=()
                     figs.append((f"{m['method']}: projection diff of the A and B calibrations, their "
                                  "uncertainties (dots: the corners each saw)"
                                  + (", and each against the true model" if m.get("truth") else ""), dst))
+        if mrcal_figures:
+            figs += _mrcal_views(r, d, out, s, log)
         per_condition[r["label"]] = figs
 
     md = report.markdown(results, title, figures, per_condition, notes)
@@ -138,6 +149,30 @@ def build(results, dirs, out: str, title: str, notes: str = "", extra_figures=()
     return {k: os.path.join(out, k) for k in list(files) + ["results.json"]}
 
 
+def _mrcal_views(r: dict, d: str, out: str, s: str, log=None) -> list:
+    """mrcal-show-* figures of the first calibrated method's A model (B for the diff); [(caption, png)]"""
+    from ..validate.mrcalshow import calibration_figures
+
+    m = next((m for m in r["methods"] if (m.get("models") or {}).get("A")), None)
+    if m is None:
+        return []
+    a = os.path.join(d, m["models"]["A"])
+    b = os.path.join(d, m["models"]["B"]) if m["models"].get("B") else None
+    if not os.path.exists(a):
+        return []
+    try:
+        figs, _ = calibration_figures(a, os.path.join(out, s), other=b if b and os.path.exists(b) else None,
+                                      prefix=f"mrcal-{m['method']}-")
+    except RuntimeError as e:  # a figure mrcal could not draw: say so, keep the report
+        (log or say)(f"rotstar-report: mrcal's views of {a}: {e}")
+        return []
+    out_figs = []
+    for cap, png, cmd in figs:
+        (log or say)(f"rotstar-report: redraw with: {cmd}")
+        out_figs.append((f"{m['method']}, calibrated on A: {cap}. Redraw: `{cmd}`", os.path.relpath(png, out)))
+    return out_figs
+
+
 def main(argv=None) -> int:
     a = parse_args(argv)
     try:
@@ -150,7 +185,8 @@ def main(argv=None) -> int:
         with open(a.notes) as f:
             notes = f.read()
     try:
-        written = build([r for r, _ in loaded], [d for _, d in loaded], a.out, a.title, notes, a.figure)
+        written = build([r for r, _ in loaded], [d for _, d in loaded], a.out, a.title, notes, a.figure,
+                        mrcal_figures=not a.no_mrcal_figures)
     except ValueError as e:
         say(f"rotstar-report: {e}")
         return 2

@@ -195,3 +195,32 @@ def draw(figs, env=None, timeout: float = 120) -> list[Figure]:
             tail = (r.stderr.strip() or r.stdout.strip() or "no output").splitlines()[-1]
             raise RuntimeError(f"{f.command}: {tail}")
     return figs
+
+
+def redraw_command(f: Figure) -> str:
+    """The command without --hardcopy/--terminal: mrcal draws it in a window"""
+    argv, skip = [], 0
+    for a in f.argv:
+        if skip:
+            skip -= 1
+        elif a in ("--hardcopy", "--terminal"):
+            skip = 1
+        else:
+            argv.append(a)
+    return shlex.join(argv)
+
+
+def calibration_figures(model_path: str, outdir: str, other: str | None = None, image_root: str | None = None,
+                        prefix: str = "") -> tuple[list[tuple[str, str, str]], dict]:
+    """Draw a calibration's mrcal-show-* figures; ([(caption, png, redraw command)], model_stats)
+
+    The first caption carries the numbers (calibrate.stats_line): outliers,
+    fit RMS, worst residual, uncertainty, valid region.
+    """
+    from .calibrate import model_stats, stats_line
+
+    stats = model_stats(mrcal.cameramodel(model_path))
+    figs = draw(show_commands(model_path, outdir, other=other, image_root=image_root, prefix=prefix))
+    out = [(f.caption + (f" ({stats_line(stats)})" if i == 0 else ""), f.png, redraw_command(f))
+           for i, f in enumerate(figs)]
+    return out, stats
