@@ -19,6 +19,32 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from rotstar_mrcal.validate.modelcheck import rewrite_block, run_case, table  # noqa: E402
 
 
+def figures_doc(work, n, seed, docdir, jobs):
+    """doc/uncertainty.md's pictures from the n-pose capture: its calibration, its two halves, its splined fit"""
+    import subprocess
+
+    from rotstar_mrcal.validate.mrcalshow import uncertainty_doc
+
+    name = f"d435-{n}poses-seed{seed}"
+    xval = f"{name}-xval"
+    print(f"$ rotstar-crossval {name} --outdir {xval}", file=sys.stderr)
+    r = subprocess.run([os.path.join(os.path.dirname(sys.executable), "rotstar-crossval"), name, "--outdir", xval,
+                        "--jobs", str(jobs)], cwd=work, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(r.stderr[-2000:])
+    print(r.stdout, file=sys.stderr)
+    cal = os.path.join(work, f"{name}-cal")
+    halves = tuple(os.path.join(work, xval, "rotstar", s, "camera-0.cameramodel") for s in "AB")
+    spl = os.path.join(cal, "candidates", "splined", "camera-0.cameramodel")
+    names = {os.path.join(cal, "camera-0.cameramodel"): "cal/camera-0.cameramodel",
+             halves[0]: "xval/rotstar/A/camera-0.cameramodel", halves[1]: "xval/rotstar/B/camera-0.cameramodel",
+             spl: "cal/candidates/splined/camera-0.cameramodel"}
+    uncertainty_doc(os.path.join(cal, "camera-0.cameramodel"), os.path.join(docdir, "img", "uncertainty"),
+                    os.path.join(docdir, "uncertainty.md"), halves=halves,
+                    splined=spl if os.path.exists(spl) else None, image_root=work, names=names)
+    print(f"wrote {os.path.join(docdir, 'uncertainty.md')}", file=sys.stderr)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--poses", type=int, nargs="+", default=[12, 20, 40])
@@ -37,9 +63,10 @@ def main():
             f"{time.time() - t0:.0f} s); median / worst: over the imager, at infinity, px.*")
     print(text)
     if a.doc:
-        doc = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "doc", "validation.md")
-        if rewrite_block(doc, "calib-bench", text):
-            print(f"wrote {os.path.normpath(doc)}", file=sys.stderr)
+        docdir = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "doc"))
+        if rewrite_block(os.path.join(docdir, "validation.md"), "calib-bench", text):
+            print(f"wrote {os.path.join(docdir, 'validation.md')}", file=sys.stderr)
+        figures_doc(a.work, max(a.poses), a.seed, docdir, a.jobs)
     return 0 if all(r["ok"] for r in rows) else 1
 
 
