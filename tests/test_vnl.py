@@ -35,7 +35,7 @@ def test_mrcal_reads_what_we_write(tmp_path):
         g = b[k][1]
         ok = np.isfinite(g[..., 0])
         assert np.allclose(obs[k][..., :2][ok], g[ok], atol=1e-6)
-        assert np.all(obs[k][..., 2][ok] == 0.5)  # level 1: the same weight on every corner
+        assert np.all(obs[k][..., 2][ok] == 1.0)  # level 0.5 is read as level 0: weight 1
         assert np.all(obs[k][..., 2][~ok] < 0)  # missing -> outlier weight
 
 
@@ -82,15 +82,16 @@ def test_every_mrcal_tool_reads_the_level_column(tmp_path):
         nx, ny, globs_per_camera=("seq/*/rotstar_00.png",), corners_cache_vnl=str(fn), weight_column_kind="level")
     valid = as_level[..., 2] > 0
     assert np.array_equal(valid, as_weight[..., 2] > 0) and valid.sum() == 6 * nx * ny - 1
-    assert np.ptp(as_level[..., 2][valid]) == 0 and np.ptp(as_weight[..., 2][valid]) == 0  # uniform in both
+    assert np.all(as_level[..., 2][valid] == 1.0)  # mrcal-calibrate-cameras: weight 1, residuals in pixels
+    assert np.ptp(as_weight[..., 2][valid]) == 0  # mrcal-cull-corners: one weight for all
     cull = os.path.join(os.path.dirname(sys.executable), "mrcal-cull-corners")
     r = subprocess.run([cull, "--cull-random-observations-ratio", "0.5", "--object-width-n", str(nx),
                         "--object-height-n", str(ny)], stdin=open(fn), capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     rows = [line.split() for line in r.stdout.splitlines() if not line.startswith("#")]
     assert len({row[0] for row in rows}) == 3  # half of the 6 boards kept, ...
-    assert sum(row[3] == "1" for row in rows) >= 3 * nx * ny - 1  # ... their corners kept, at level 1 again
+    assert sum(row[3] == "0" for row in rows) >= 3 * nx * ny - 1  # ... their corners kept, as level 0
     r = subprocess.run([cull, "--cull-left-of", "150"], stdin=open(fn), capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     culled = [line.split() for line in r.stdout.splitlines() if not line.startswith("#")]
-    assert any(row[3] == "-" for row in culled) and any(row[3] == "1" for row in culled)
+    assert any(row[3] == "-" for row in culled) and any(row[3] == "0.5" for row in culled)
