@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import concurrent.futures as cf
 import json
 import os
 import sys
@@ -13,9 +12,8 @@ import numpy as np
 
 from .. import dataset
 from ..validate import calibrate as cal
-from ..validate import compare, plots, report
-from ..validate.calibrate import calibration_argv, focal_seed, resolve_lensmodel
-from ..validate.cornersets import DESCRIPTIONS, METHODS
+from ..validate import plots, report
+from ..validate.cornersets import METHODS
 from ..validate.detection import detect_dataset as _detect_dataset
 from ..validate.detection import split_interleaved
 from ..validate.sources import SourceError, load_corner_set, load_model
@@ -193,152 +191,21 @@ def mode_models(a, path_a: str, path_b: str) -> int:
     return 0
 
 
-def _calibrate(job):
-    """Worker: run one printed mrcal-calibrate-cameras command (in this process: no start-up cost)"""
-    name, side, argv = job
-    try:
-        cal.run_calibration(argv, in_process=True)
-        return name, side, None
-    except cal.CalibrationError as e:
-        return name, side, str(e)
-
-
-def _evaluate(method, path_a, path_b, test_a, test_b, seq_a, seq_b, gridn, distance):
-    """Worker: one method's evaluation from its two model files"""
-    import mrcal
-
-    from ..simulate import load_truth
-
-    def truth(seq):
-        if seq and os.path.exists(os.path.join(seq, "truth.json")):
-            t = load_truth(seq)
-            return compare.Truth(t.model, t.rt_cam_board)
-        return None
-
-    return compare.evaluate(method, mrcal.cameramodel(path_a), mrcal.cameramodel(path_b), test_a, test_b,
-                            truth(seq_a), truth(seq_b), gridn_width=gridn, distance=distance)
-
-
 def mode_sets(a, sets: dict) -> int:
     """sets: {name: (vnl A, vnl B)}"""
-    import matplotlib.pyplot as plt
+    from ..validate.groups import compare_sets
 
-    outdir = a.outdir
-    os.makedirs(outdir, exist_ok=True)
-    loaded, failed = {}, {}
-    for name, (va, vb) in sets.items():
-        try:
-            loaded[name] = (load_corner_set(va, a.pattern, a.imagersize),
-                            load_corner_set(vb, a.pattern, a.imagersize))
-            few = [f"{s}: {len(c.files)} boards" for s, c in zip("AB", loaded[name]) if len(c.files) < cal.MIN_BOARDS]
-            if few:
-                del loaded[name]
-                raise SourceError(f"too few boards to calibrate ({', '.join(few)}; need {cal.MIN_BOARDS})")
-        except SourceError as e:  # e.g. a detector that found no board in a group: a result, not a crash
-            say(f"rotstar-crossval: {name}: {e}")
-            failed[name] = [str(e)]
-    if not loaded:
-        raise SourceError("no corner set could be read")
-    first = next(iter(loaded.values()))[0]
-    lensmodel = resolve_lensmodel(a.lensmodel, first.imagersize, focal_seed(first, check=False), a.knots_x)
-    if "SPLINED" in lensmodel and min(len(c.files) for p in loaded.values() for c in p) < cal.SPLINED_MIN_BOARDS:
-        say(f"rotstar-crossval: warning: fewer than {cal.SPLINED_MIN_BOARDS} boards in a group for a splined "
-            "model; consider --lensmodel opencv8")
-
-    jobs = []
-    for name, (ca, cb) in loaded.items():
-        for side, cs in (("A", ca), ("B", cb)):
-            jobs.append((name, side, calibration_argv(cs, os.path.join(outdir, name, side), lensmodel)))
-    for name, side, argv in jobs:
-        say(f"[{name} {side}] $ {cal.command_line(argv)}")
-
-    progress = Progress(len(jobs))
-    with cf.ProcessPoolExecutor(max(1, a.jobs)) as ex:
-        for name, side, err in ex.map(_calibrate, jobs):
-            progress.step(f"calibrate {name} {side}", "failed" if err else "done")
-            if err:
-                failed.setdefault(name, []).append(f"{side}: {err}")
-    for name, errs in failed.items():
-        if name in loaded:
-            say(f"rotstar-crossval: {name}: calibration failed: " + "; ".join(errs))
-
-    todo = [n for n in loaded if n not in failed]
-    model = {n: {s: os.path.join(outdir, n, s, "camera-0.cameramodel") for s in "AB"} for n in todo}
-    args = {n: (n, model[n]["A"], model[n]["B"], loaded[n][0].test_set(), loaded[n][1].test_set(),
-                loaded[n][0].seq, loaded[n][1].seq, a.gridn, a.distance) for n in todo}
-    evals = {}
-    progress = Progress(len(todo))
-    if a.jobs > 1 and len(todo) > 1:
-        with cf.ProcessPoolExecutor(min(a.jobs, len(todo))) as ex:
-            futs = {ex.submit(_evaluate, *args[n]): n for n in todo}
-            for f in cf.as_completed(futs):
-                evals[futs[f]] = f.result()
-                progress.step(f"evaluate {futs[f]}", "done")
-    else:
-        for n in todo:
-            evals[n] = _evaluate(*args[n])
-            progress.step(f"evaluate {n}", "done")
-
-    # figures: one colour scale for every method's maps, set by the best method (worse ones saturate)
-    cvs = [e.crossval for e in evals.values() if e.crossval is not None]
-    cbmax = plots.nice_max(max(3 * min(c.diff_median for c in cvs),
-                               2 * float(np.median([c.unc_median for c in cvs])))) if cvs else None
-    methods_out = []
-    for n in sets:
-        if n in failed:
-            methods_out.append({"method": n, "description": DESCRIPTIONS.get(n, ""), "error": "; ".join(failed[n]),
-                                "heldout": None, "crossval": None, "truth": None})
-            continue
-        e = evals[n]
-        ca, cb = loaded[n]
-        panels, points = [], []
-        if e.crossval is not None:
-            panels += [("|projection diff| A vs B", e.crossval.diff), ("uncertainty A (1-sigma)", e.crossval.u0),
-                       ("uncertainty B (1-sigma)", e.crossval.u1)]
-            points += [None, ca.corners.reshape(-1, 2), cb.corners.reshape(-1, 2)]
-        for side, cs in (("A", ca), ("B", cb)):
-            if side in e.truth:
-                panels.append((f"calibrated on {side} vs true model", e.truth[side].error))
-                points.append(cs.corners.reshape(-1, 2))
-        figs = {}
-        if panels:
-            fig = plots.heatmaps(e.crossval.q if e.crossval is not None else e.truth["A"].q, panels,
-                                 ca.imagersize, cbmax=cbmax, points=points, title=f"{n}: {a.label or ''}".rstrip(": "))
-            figs["maps"] = f"{n}-maps.png"
-            fig.savefig(os.path.join(outdir, figs["maps"]), dpi=100)
-            plt.close(fig)
-        methods_out.append({**e.summary, "description": DESCRIPTIONS.get(n, ""), "figures": figs,
-                            "models": {s: os.path.relpath(model[n][s], outdir) for s in "AB"},
-                            "corners": {"A": os.path.abspath(ca.vnl), "B": os.path.abspath(cb.vnl)}})
-    per_pose = [(f"calibrated on A, tested on B ({a.label or ''})",
-                 {m["method"]: m["heldout"]["A->B"]["per_pose"] for m in methods_out if m.get("heldout")}),
-                (f"calibrated on B, tested on A ({a.label or ''})",
-                 {m["method"]: m["heldout"]["B->A"]["per_pose"] for m in methods_out if m.get("heldout")})]
-    figures = {}
-    if any(p[1] for p in per_pose):
-        fig = plots.per_pose(per_pose)
-        figures["per_pose"] = "per-pose.png"
-        fig.savefig(os.path.join(outdir, figures["per_pose"]), dpi=100)
-        plt.close(fig)
-    first_a, first_b = next(iter(loaded.values()))
-    result = {
-        "format": "rotstar-crossval/1",
-        "label": a.label or f"{os.path.basename(first_a.seq or first_a.vnl)} vs {os.path.basename(first_b.seq or first_b.vnl)}",
-        "groups": {"A": first_a.seq or first_a.vnl, "B": first_b.seq or first_b.vnl},
-        "lensmodel": lensmodel,
-        "distance_m": a.distance,
-        "gridn": a.gridn,
-        "methods": methods_out,
-        "figures": figures,
-        "commands": [cal.command_line(argv) for _, _, argv in jobs],
-    }
-    _write_json(result, os.path.join(outdir, "results.json"))
-    say(f"rotstar-crossval: wrote {os.path.join(outdir, 'results.json')}")
+    progress = Progress(3 * len(sets))  # two calibrations and one evaluation per set
+    c = compare_sets(sets, a.outdir, a.lensmodel, a.knots_x, a.pattern, a.imagersize, a.gridn, a.distance, a.jobs,
+                     a.label, log=lambda s: say(s if s.startswith("[") else f"rotstar-crossval: {s}"),
+                     progress=progress.step)
+    _write_json(c.to_json(), os.path.join(a.outdir, "results.json"))
+    say(f"rotstar-crossval: wrote {os.path.join(a.outdir, 'results.json')}")
     if a.json:
-        _write_json(result)
+        _write_json(c.to_json())
     else:
-        print(report.detail(result).markdown())
-    return 0 if len(failed) < len(sets) else 1  # a set that cannot be calibrated is a result too
+        print(c.markdown())
+    return 0 if c.failed < c.sets else 1  # a set that cannot be calibrated is a result too
 
 
 def _outdir_error(path: str) -> str | None:
