@@ -68,3 +68,13 @@ def test_report_rejects_duplicate_labels(tmp_path):
 
     assert main([str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "r")]) == 2
     assert report.headline([res]).rows == []
+
+
+def test_report_out_under_a_file(tmp_path):
+    from rotstar_mrcal.cli.report import main
+
+    res = {"format": "rotstar-crossval/1", "label": "x", "methods": []}
+    os.makedirs(tmp_path / "a")
+    json.dump(res, open(tmp_path / "a" / "results.json", "w"))
+    (tmp_path / "file").write_text("")
+    assert main([str(tmp_path / "a"), "--out", str(tmp_path / "file" / "report")]) == 2

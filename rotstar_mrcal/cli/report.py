@@ -28,6 +28,9 @@ each with the mrcal-show-* command that redraws it (stderr and the page).
 
 stdout: the headline table and the verdict (Markdown), for pasting;
 stderr: the files written and the mrcal-show-* commands.
+
+Exit status: 0 written; 2 bad arguments (an unreadable results.json,
+duplicate labels, an --out that cannot be a folder).
 """
 
 
@@ -139,14 +142,13 @@ def build(results, dirs, out: str, title: str, notes: str = "", extra_figures=()
     page = report.html(results, title, figures, per_condition, notes)
     head = report.headline(results)
     head_md = head.markdown() + "\n\n" + "\n".join(f"- {v}" for v in report.verdicts(results)) + "\n"
-    files = {"index.md": md, "index.html": page, "headline.md": head_md}
-    for name, text in files.items():
-        with open(os.path.join(out, name), "w") as f:
+    files = {"index.md": md, "index.html": page, "headline.md": head_md,
+             "results.json": json.dumps({"format": "rotstar-report/1", "conditions": results}, indent=1) + "\n"}
+    for name, text in files.items():  # each file whole or not at all
+        with open(os.path.join(out, name + ".tmp"), "w") as f:
             f.write(text)
-    with open(os.path.join(out, "results.json"), "w") as f:
-        json.dump({"format": "rotstar-report/1", "conditions": results}, f, indent=1)
-        f.write("\n")
-    return {k: os.path.join(out, k) for k in list(files) + ["results.json"]}
+        os.replace(os.path.join(out, name + ".tmp"), os.path.join(out, name))
+    return {k: os.path.join(out, k) for k in files}
 
 
 def _mrcal_views(r: dict, d: str, out: str, s: str, log=None) -> list:
@@ -179,6 +181,11 @@ def main(argv=None) -> int:
         loaded = [load_results(p) for p in a.xval]
     except (OSError, ValueError, json.JSONDecodeError) as e:
         say(f"rotstar-report: {e}")
+        return 2
+    try:
+        os.makedirs(a.out, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        say(f"rotstar-report: --out {a.out}: a file is in the way (not a folder)")
         return 2
     notes = ""
     if a.notes:
