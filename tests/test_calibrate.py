@@ -94,7 +94,7 @@ def test_inputs_that_cannot_give_a_model(calibrated, d435_seq, run_cli, tmp_path
     one.write_text("".join(lines[:1 + 126]))  # the header and one board
     r = run_cli("rotstar-calibrate", d435_seq.path, "--corners", one, "--outdir", tmp_path / "c1")
     assert r.returncode == 2 and "mrcal-calibrate-cameras" not in r.stderr, r.stderr
-    assert len([x for x in r.stderr.splitlines() if x.strip()]) == 1  # one line
+    assert len([x for x in r.stderr.splitlines() if x.strip()]) == 1 and "1 board in" in r.stderr  # one line
     # one pose of a portrait imager among landscape ones
     odd = tmp_path / "odd" / "pose099"
     odd.mkdir(parents=True)

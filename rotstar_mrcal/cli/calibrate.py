@@ -126,6 +126,7 @@ def main(argv=None) -> int:
     try:
         cs = load_corner_set(vnl, pattern=a.seq, imagersize=a.imagersize, truth=False)
         if a.dry_run:
+            cal.check_inputs(cs)
             f = a.focal or cal.focal_seed(cs, check=not a.force)
             lm = cal.resolve_lensmodel(a.lensmodel, cs.imagersize, f, a.knots_x)
             cal.check_inputs(cs, lm, a.force)

@@ -383,12 +383,13 @@ def focal_seed(cs, check: bool = True) -> float:
     return f
 
 
-def check_inputs(cs, lensmodel: str, force: bool = False) -> None:
+def check_inputs(cs, lensmodel: str | None = None, force: bool = False) -> None:
     """InputError (one line) for a corner set that cannot give a model with this lens model
 
     Always: at least MIN_BOARDS boards, and every image that can be read of
     the corner set's imager size. Splined models (unless force): at least
-    SPLINED_MIN_BOARDS boards covering SPLINED_MIN_COVERAGE of the imager.
+    SPLINED_MIN_BOARDS boards covering SPLINED_MIN_COVERAGE of the imager
+    (lensmodel None: not checked).
     """
     from .sources import resolve_image
 
@@ -407,7 +408,7 @@ def check_inputs(cs, lensmodel: str, force: bool = False) -> None:
         raise InputError(f"{len(fs)} image{'s' * (len(fs) != 1)} of size {s[0]}x{s[1]} (e.g. {fs[0]}) among "
                          f"{cs.imagersize[0]}x{cs.imagersize[1]} ones: one calibration is one imager; "
                          "remove them from the corners file or the dataset")
-    if "SPLINED" in lensmodel and not force:
+    if lensmodel and "SPLINED" in lensmodel and not force:
         ok, why = splined_supported(cs)
         if not ok:
             raise InputError(f"{why}; use the default model (--lensmodel auto) or --force to try anyway")
@@ -654,6 +655,7 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
     for stale in (final, final + ".tmp"):
         if os.path.exists(stale):
             os.remove(stale)
+    check_inputs(cs)  # the boards and the image sizes first: they decide whether anything can be done
     f = focal_seed(cs, check=not force) if focal is None else float(focal)
     lensmodel = resolve_lensmodel(spec, cs.imagersize, f, knots_x)
     check_inputs(cs, lensmodel, force)
@@ -709,12 +711,13 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
             failures.append(f"the lean and splined models disagree by {comparison['diff_median_px']:.4f} px "
                             f"({ratio:.1f}x their uncertainty) and fit equally well: the boards cannot tell "
                             "which is right")
+        elif ratio <= 2:
+            reason = (f"{lean.lensmodel}: the splined model agrees with it within {ratio:.1f}x their uncertainty "
+                      f"(RMS {spl.stats['rms_px']:.5f} vs {lean.stats['rms_px']:.5f} px): the lean model is enough")
         else:
-            reason = (f"{lean.lensmodel}: the splined model does not fit the corners better (RMS "
-                      f"{spl.stats['rms_px']:.5f} vs {lean.stats['rms_px']:.5f} px)"
-                      + (f" and agrees within {ratio:.1f}x the uncertainty" if ratio <= 2 else
-                         f"; its {comparison['diff_median_px']:.4f} px difference is freedom the boards do not "
-                         "constrain"))
+            reason = (f"{lean.lensmodel}: the splined model fits the corners worse (RMS "
+                      f"{spl.stats['rms_px']:.5f} vs {lean.stats['rms_px']:.5f} px); its "
+                      f"{comparison['diff_median_px']:.4f} px difference is freedom the boards do not constrain")
     written = None
     if not failures or keep:
         os.makedirs(outdir, exist_ok=True)
