@@ -64,6 +64,13 @@ def test_default_run_reports_what_mrcal_says(calibrated, d435_seq, run_cli, tmp_
     assert s["boards"] >= 11 and s["outliers"] <= 0.02 * s["corners"] and 0.001 < s["rms_px"] < 0.03
     assert 0 < s["uncertainty_px"]["centre"] < s["uncertainty_px"]["corners_max"] < 0.2
     assert s["valid_region_fraction"] > 0.1  # mrcal's default parameters give an empty region here
+    import subprocess
+    import sys
+
+    tool = os.path.join(os.path.dirname(sys.executable), "mrcal-is-within-valid-intrinsics-region")
+    w = subprocess.run([tool, "--cols-xy", "x", "y", str(tmp_path / "camera-0.cameramodel")], capture_output=True,
+                       text=True, input="# x y\n640 400\n1 1\n")
+    assert w.returncode == 0 and w.stdout.splitlines()[1:] == ["640 400 1", "1 1 0"], w.stdout + w.stderr
     truth = load_truth(d435_seq.path)
     model = mrcal.cameramodel(str(tmp_path / "camera-0.cameramodel"))
     assert truth_error(model, truth.model, truth_poses_of(model, truth.rt_cam_board)).median < 0.05

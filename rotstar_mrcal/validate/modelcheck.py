@@ -141,6 +141,8 @@ def table(rows) -> str:
         d = r["default"]
         out.append(f"| {r['poses']} ({r['boards']}) | {d.get('lensmodel', '-').replace('LENSMODEL_', '')} | "
                    f"{_cell(d)} | {_cell(r['printed'])} | {_cell(r['splined'])} | {'yes' if r['ok'] else 'NO'} |")
+    out.append("")
+    out += [f"- {r['poses']} poses, rotstar-calibrate's reason: {r['default'].get('reason') or '-'}" for r in rows]
     return "\n".join(out)
 
 
