@@ -652,7 +652,8 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
 
     log = log or (lambda s: None)
     final = os.path.join(outdir, "camera-0.cameramodel")
-    for stale in (final, final + ".tmp"):
+    for stale in [final, final + ".tmp"] + [os.path.join(outdir, "candidates", n, "camera-0.cameramodel")
+                                            for n in ("lean", "splined", "model")]:
         if os.path.exists(stale):
             os.remove(stale)
     check_inputs(cs)  # the boards and the image sizes first: they decide whether anything can be done
