@@ -26,8 +26,9 @@ mrcal-calibrate-cameras wrote (it holds its optimization_inputs):
 
 mrcal's default colour scales (0-3 px for the uncertainty, 0-4 px for the
 diff) are made for ~0.3 px corners: ours (0.005-0.05 px) come out uniformly
-black. scales() derives them from the model: the uncertainty's --cbmax from
-its largest value at the imager corners (rounded up to 1, 2, 5 x 10^k), the
+black. scales() derives them from the model: the uncertainty's --cbmax 3x
+its median over the imager (rounded up to 1, 2, 5 x 10^k; the corners the
+boards did not reach saturate), the
 residual vectors' --vectorscale so that the RMS residual draws as ~20
 pixels, the histogram's --binwidth a tenth of the RMS, the diff's --cbmax 5x
 the sum of the two models' uncertainty at the centre.
@@ -123,9 +124,10 @@ def scales(model: mrcal.cameramodel, other: mrcal.cameramodel | None = None) -> 
     W, H = (int(v) for v in model.imagersize())
     q = np.array([[(W - 1) / 2, (H - 1) / 2], [0, 0], [W - 1, 0], [0, H - 1], [W - 1, H - 1]], float)
     u = projection_uncertainty(model, q)
+    grid = projection_uncertainty(model, mrcal.sample_imager(16, 10, W, H))
     e = board_residuals(model)
     rms = float(np.sqrt(np.nanmean(e**2)))
-    out = {"uncertainty_cbmax": nice_max(float(np.max(u))),
+    out = {"uncertainty_cbmax": nice_max(3 * float(np.median(grid))),
            "vectorscale": float(nice_max(20.0 / max(rms, 1e-6)) / 2),
            "binwidth": float(f"{rms / 10:.1g}"),
            "residual_cbmax": nice_max(3 * rms)}
