@@ -9,8 +9,11 @@ export UV_PYTHON_DOWNLOADS := never
 export UV_PROJECT_ENVIRONMENT := $(CURDIR)/.venv
 
 VENV_BIN := $(CURDIR)/.venv/bin
-# mrcal's wheel ships gnuplot in the venv's bin: put it first for --hardcopy plots
-RUN := PATH="$(VENV_BIN):$$PATH"
+# mrcal's tools and ours from the venv; gnuplot from .tools/gnuplot (a link to Debian's, which reads
+# PNG images: the one mrcal's wheel puts in the venv's bin cannot, and mrcal-show-residuals-board-observation
+# needs it to draw a board over its image)
+GNUPLOT_BIN := $(CURDIR)/.tools/gnuplot
+RUN := PATH="$(GNUPLOT_BIN):$(VENV_BIN):$$PATH"
 PYTEST_ARGS ?=
 DEMO_DIR ?= demo-out
 BENCH_ARGS ?=
@@ -25,12 +28,14 @@ ifeq ($(UV),)
 UV := $(CURDIR)/.tools/bin/uv
 endif
 
-.PHONY: help setup test demo bench clean check-python system-deps
+.PHONY: help setup test demo bench calib-bench pip-check clean check-python system-deps
 
 help:
 	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
 	@echo "make test   - run the test suite (all set-up included)"
-	@echo "make bench  - accuracy and speed benchmark against OpenCV and mrgingham"
+	@echo "make bench  - accuracy and speed benchmark against OpenCV and mrgingham, and calib-bench"
+	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses)"
+	@echo "make pip-check   - install with plain pip (scripts/pip_install.sh) into a fresh venv and check it"
 
 check-python:
 	@if [ -z "$(PYTHON)" ]; then \
@@ -44,11 +49,13 @@ $(CURDIR)/.tools/bin/uv: | check-python
 system-deps:
 	@missing=""; command -v mrgingham >/dev/null || missing="$$missing mrgingham"; \
 	[ -x /usr/bin/chromium ] || missing="$$missing chromium"; \
+	/usr/bin/gnuplot -e 'show version long' 2>&1 | grep -q +GD_PNG || missing="$$missing gnuplot-nox"; \
 	if [ -n "$$missing" ]; then \
 	  echo "installing Debian packages:$$missing" >&2; \
 	  if [ "$$(id -u)" = 0 ]; then (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing) >&2 || echo "warning: could not install$$missing; the tests that need them will be skipped" >&2; \
 	  else echo "warning: not root, cannot apt-get install$$missing; the tests that need them will be skipped" >&2; fi; \
-	fi
+	fi; \
+	if [ -x /usr/bin/gnuplot ]; then mkdir -p $(GNUPLOT_BIN) && ln -sf /usr/bin/gnuplot $(GNUPLOT_BIN)/gnuplot; fi
 
 # Bytecode compiled at install time: with PYTHONDONTWRITEBYTECODE set (or a read-only venv) every
 # command would otherwise compile scipy & co. from source at each start (measured 0.5 s of rotstar-detect's 0.95 s).
@@ -67,6 +74,14 @@ demo: setup
 
 bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/bench.py $(BENCH_ARGS)
+	$(MAKE) calib-bench
+
+# writes its table into doc/validation.md (between the calib-bench markers)
+calib-bench: setup
+	$(RUN) $(VENV_BIN)/python scripts/calib_bench.py --work calib-bench-out --doc
+
+pip-check: check-python
+	PYTHON=$(PYTHON) $(VENV_BIN)/python -m pytest -q -s -m slow tests/test_pip_install.py
 
 clean:
-	rm -rf .venv .tools $(DEMO_DIR) .pytest_cache
+	rm -rf .venv .tools $(DEMO_DIR) .pytest_cache calib-bench-out

@@ -17,6 +17,8 @@ Zhang's constraints on the image of the absolute conic, with square pixels
 and the principal point at the image centre, leave one unknown, 1/f^2; each
 board's homography gives two linear equations in it. The median over boards
 is returned, or a 90-degree field of view when no board constrains it.
+focal_estimates returns the per-board values, to judge whether the boards
+agree (one or two boards can be far off: 3275 px for a 640 px camera).
 """
 
 from __future__ import annotations
@@ -30,9 +32,17 @@ def estimate_focal(boards, board_xy: np.ndarray, imagersize) -> float:
 
     board_xy: (ny, nx, 2) board coordinates of the corners (metres).
     """
+    W = imagersize[0]
+    fallback = W / 2  # 90-degree horizontal field of view
+    est = focal_estimates(boards, board_xy, imagersize)
+    f = float(np.median(est)) if len(est) else fallback
+    return f if 0.1 * W < f < 20 * W else fallback
+
+
+def focal_estimates(boards, board_xy: np.ndarray, imagersize) -> np.ndarray:
+    """One focal length (pixels) per board that constrains it (see estimate_focal)"""
     W, H = imagersize
     c = np.array([(W - 1) / 2, (H - 1) / 2])
-    fallback = W / 2  # 90-degree horizontal field of view
     est = []
     for q in boards:
         if q is None:
@@ -52,5 +62,4 @@ def estimate_focal(boards, board_xy: np.ndarray, imagersize) -> float:
         s = -np.dot(A, [b1, b2]) / max(np.dot(A, A), 1e-300)
         if s > 0:
             est.append(1 / np.sqrt(s))
-    f = float(np.median(est)) if est else fallback
-    return f if 0.1 * W < f < 20 * W else fallback
+    return np.array(est, float)

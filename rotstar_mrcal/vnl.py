@@ -8,7 +8,7 @@ SYNOPSIS
     >>> out = io.StringIO()
     >>> write_corners(out, [("seq/a/rotstar_00.png", grid), ("seq/b/rotstar_00.png", None)])
     >>> print(out.getvalue().splitlines()[1:3], out.getvalue().splitlines()[-1])
-    ['seq/a/rotstar_00.png 0.000000 1.000000 0', 'seq/a/rotstar_00.png 2.000000 3.000000 0'] seq/b/rotstar_00.png - - -
+    ['seq/a/rotstar_00.png 0.000000 1.000000 0.5', 'seq/a/rotstar_00.png 2.000000 3.000000 0.5'] seq/b/rotstar_00.png - - -
     >>> boards = read_corners(io.StringIO(out.getvalue()), 3, 2)
     >>> boards["seq/a/rotstar_00.png"][1, 2].tolist(), boards["seq/b/rotstar_00.png"]
     ([nan, nan], None)
@@ -21,12 +21,34 @@ an image without a board. A missing corner is `filename - - -`. Coordinates
 use mrcal's convention (centre of the top-left pixel = (0, 0)). Filenames must
 be ASCII without whitespace. With weights (mrcal's
 --corners-cache-has-weights) the fourth column is a weight proportional to
-1/sigma; otherwise it is the decimation level 0.
+1/sigma; otherwise it is `level` LEVEL = 0.5 on every corner.
+
+Why 0.5 and not 0. mrcal's tools disagree about the fourth column of a
+`# filename x y level` file: mrcal-calibrate-cameras (and
+mrcal.compute_chessboard_corners' default) read it as a decimation level,
+weight 2^-int(level), but mrcal-cull-corners --cull-random-observations-ratio
+(mrcal 2.5.2) reads the same file with weight_column_kind='weight', so level
+0 becomes weight 0, "missing", and every board is lost; it then writes the
+weights back as levels (int(weight)). A level in (0, 1) is read as weight 1
+by the first (int(0.5) = 0: exactly mrgingham's level 0) and as weight 0.5,
+a valid corner, by the second, which writes it back as level 0. So every
+corner is kept by both, and the calibration's residuals stay in pixels (a
+level of 1 would also work for mrcal-cull-corners, but makes every weight
+1/2, and mrcal's residual plots and histograms, which show weighted
+residuals, would read half the true error). mrcal-cull-corners needs the
+header exactly `# filename x y level` and four columns (it sets the fourth to
+'-' to cull a point), so dropping the column is no way out. Weighted files
+(`# filename x y weight`) are read by mrcal-calibrate-cameras
+--corners-cache-has-weights; mrcal-cull-corners refuses them (its header
+check), as it refuses any weighted file.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+LEVEL = "0.5"
+"""The fourth column of an unweighted corners.vnl (module doc: why not 0)"""
 
 
 def mrcal_can_read(fn: str) -> bool:
@@ -59,7 +81,7 @@ def write_corners(stream, boards, weights=None, precision: int = 6) -> None:
             fourth = [f"{v:.6g}" for v in np.where(valid, wt, 0)]
         else:
             valid = np.isfinite(xy).all(axis=1)
-            fourth = ["0"] * len(xy)
+            fourth = [str(LEVEL)] * len(xy)
         for (x, y), ok, f4 in zip(xy, valid, fourth):
             stream.write(f"{fn} {x:.{precision}f} {y:.{precision}f} {f4}\n" if ok else f"{fn} - - -\n")
 

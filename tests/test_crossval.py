@@ -104,3 +104,34 @@ def test_unreadable_models_are_named(run_cli, tmp_path, heldout_run):
     mrcal.cameramodel(intrinsics=("LENSMODEL_PINHOLE", [600.0, 600, 640, 400]), imagersize=(1280, 800)).write(str(plain))
     r = run_cli("rotstar-crossval", plain, plain)
     assert r.returncode == 2 and "has no optimization_inputs" in r.stderr
+
+
+def test_one_dataset_is_split_in_two(d435_seq, run_cli, tmp_path):
+    """rotstar-crossval SEQ: interleaved halves of one recording, written for mrcal's own tools too"""
+    xdir = tmp_path / "xval"
+    r = run_cli("rotstar-crossval", d435_seq.path, "--outdir", xdir, "--jobs", "2", "--gridn", "20", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "interleaved" in r.stderr and r.stdout.startswith("| method |")
+    a, b = (read_vnl_names(str(xdir / "rotstar" / f"{s}.vnl")) for s in "AB")
+    assert a and b and not set(a) & set(b) and abs(len(a) - len(b)) <= 1
+    res = json.load(open(xdir / "results.json"))
+    assert res["lensmodel"] == "LENSMODEL_OPENCV8"  # rotstar-calibrate's lean model
+    assert res["methods"][0]["heldout"]["A->B"]["mean_px"] < 0.03
+
+
+def test_heldout_without_outdir_writes_nothing_here(d435_seq, run_cli, tmp_path):
+    r = run_cli("rotstar-crossval", os.path.join(d435_seq.path, "truth.cameramodel"), d435_seq.path, "--jobs", "2",
+                cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert os.listdir(tmp_path) == [] and "not kept" in r.stdout
+
+
+def test_model_of_another_imager_is_refused(heldout_run, d435_seq, run_cli, tmp_path):
+    _, out = heldout_run
+    lens, intr = d435_seq.model.intrinsics()
+    other = tmp_path / "portrait.cameramodel"
+    mrcal.cameramodel(intrinsics=(lens, intr), imagersize=(800, 1280)).write(str(other))
+    r = run_cli("rotstar-crossval", other, os.path.join(out, "rotstar", "test.vnl"))
+    assert r.returncode == 2 and "800x1280" in r.stderr and r.stdout == ""
+    r = run_cli("rotstar-crossval", tmp_path / "missing.cameramodel", os.path.join(out, "rotstar", "test.vnl"))
+    assert r.returncode == 2 and "no such file" in r.stderr

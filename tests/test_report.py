@@ -42,6 +42,12 @@ def test_report_builds_from_a_small_simulated_run(run_cli, tmp_path):
     assert md.startswith("# small run") and "## exposure 1" in md and "## exposure 2" in md
     for img in re.findall(r"!\[[^]]*\]\(([^)]+)\)", md) + re.findall(r"src='([^']+)'", (out / "index.html").read_text()):
         assert os.path.exists(out / img), img  # every figure the pages show is in the folder
+    # mrcal's own views of the first method's calibration, each with the command that redraws it
+    for tool in ("projection-uncertainty --observations", "residuals-board-observation", "residuals --histogram",
+                 "projection-diff", "valid-intrinsics-region", "distortion-off-pinhole"):
+        assert f"Redraw: `mrcal-show-{tool}" in md and f"redraw with: mrcal-show-{tool}" in r.stderr, tool
+    assert "--cbmax 3 " not in md and "outliers" in md
+    assert os.path.getsize(out / "exposure-1" / "mrcal-sharp-uncertainty.png") > 1000
     # the headline on stdout: both methods, the sharp corners win everywhere and say so
     assert r.stdout == (out / "headline.md").read_text()
     rows = {line.split("|")[1].strip(): line for line in r.stdout.splitlines() if line.startswith("| ")}
@@ -62,3 +68,13 @@ def test_report_rejects_duplicate_labels(tmp_path):
 
     assert main([str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "r")]) == 2
     assert report.headline([res]).rows == []
+
+
+def test_report_out_under_a_file(tmp_path):
+    from rotstar_mrcal.cli.report import main
+
+    res = {"format": "rotstar-crossval/1", "label": "x", "methods": []}
+    os.makedirs(tmp_path / "a")
+    json.dump(res, open(tmp_path / "a" / "results.json", "w"))
+    (tmp_path / "file").write_text("")
+    assert main([str(tmp_path / "a"), "--out", str(tmp_path / "file" / "report")]) == 2

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from rotstar_mrcal import dataset, simulate
-from rotstar_mrcal.cli.calibrate import calibration_argv
+from rotstar_mrcal.validate.calibrate import calibration_argv
 from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.simulate.dataset import Truth, write_truth
 from rotstar_mrcal.validate import calibrate as cal
@@ -129,7 +129,7 @@ def test_weights_column_is_passed_to_mrcal(tmp_path):
     with open(vnl) as f:
         text = f.read().replace("# filename x y level", "# filename x y weight")
     with open(vnl, "w") as f:
-        f.write(text.replace(" 0\n", " 1\n"))
+        f.write(text.replace(" 0.5\n", " 1\n"))
     cs = load_corner_set(vnl)
     argv = calibration_argv(cs, str(tmp_path / "cal"), LENSMODEL, focal=640)
     assert cs.weights and argv[1] == "--corners-cache-has-weights"

@@ -35,7 +35,7 @@ def test_mrcal_reads_what_we_write(tmp_path):
         g = b[k][1]
         ok = np.isfinite(g[..., 0])
         assert np.allclose(obs[k][..., :2][ok], g[ok], atol=1e-6)
-        assert np.all(obs[k][..., 2][ok] == 1.0)
+        assert np.all(obs[k][..., 2][ok] == 1.0)  # level 0.5 is read as level 0: weight 1
         assert np.all(obs[k][..., 2][~ok] < 0)  # missing -> outlier weight
 
 
@@ -62,3 +62,36 @@ def test_rejects_names_mrcal_cannot_parse():
         write_corners(io.StringIO(), [("seq/pose 1/a.png", None)])
     with pytest.raises(ValueError, match="ASCII"):
         write_corners(io.StringIO(), [("seq/posé/a.png", None)])
+
+
+def test_every_mrcal_tool_reads_the_level_column(tmp_path):
+    """mrcal-cull-corners reads the 4th column as a weight, mrcal-calibrate-cameras as a level: both keep every corner"""
+    import os
+    import subprocess
+    import sys
+
+    nx, ny = 5, 4
+    b = boards(nx, ny, 6)
+    b[1][1][2, 3] = np.nan
+    fn = tmp_path / "corners.vnl"
+    with open(fn, "w") as f:
+        write_corners(f, b)
+    as_weight, *_ = mrcal.compute_chessboard_corners(
+        nx, ny, globs_per_camera=("seq/*/rotstar_00.png",), corners_cache_vnl=str(fn), weight_column_kind="weight")
+    as_level, *_ = mrcal.compute_chessboard_corners(
+        nx, ny, globs_per_camera=("seq/*/rotstar_00.png",), corners_cache_vnl=str(fn), weight_column_kind="level")
+    valid = as_level[..., 2] > 0
+    assert np.array_equal(valid, as_weight[..., 2] > 0) and valid.sum() == 6 * nx * ny - 1
+    assert np.all(as_level[..., 2][valid] == 1.0)  # mrcal-calibrate-cameras: weight 1, residuals in pixels
+    assert np.ptp(as_weight[..., 2][valid]) == 0  # mrcal-cull-corners: one weight for all
+    cull = os.path.join(os.path.dirname(sys.executable), "mrcal-cull-corners")
+    r = subprocess.run([cull, "--cull-random-observations-ratio", "0.5", "--object-width-n", str(nx),
+                        "--object-height-n", str(ny)], stdin=open(fn), capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rows = [line.split() for line in r.stdout.splitlines() if not line.startswith("#")]
+    assert len({row[0] for row in rows}) == 3  # half of the 6 boards kept, ...
+    assert sum(row[3] == "0" for row in rows) >= 3 * nx * ny - 1  # ... their corners kept, as level 0
+    r = subprocess.run([cull, "--cull-left-of", "150"], stdin=open(fn), capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    culled = [line.split() for line in r.stdout.splitlines() if not line.startswith("#")]
+    assert any(row[3] == "-" for row in culled) and any(row[3] == "0.5" for row in culled)

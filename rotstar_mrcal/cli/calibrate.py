@@ -3,33 +3,48 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 
-
 from .. import dataset
-from ..focal import estimate_focal
 from ..validate import calibrate as cal
-from ..validate.sources import CornerSet, SourceError, load_corner_set
+from ..validate.sources import SourceError, load_corner_set
 from .common import say
 
-DESCRIPTION = """\
+DESCRIPTION = f"""\
 Calibrate a camera from a rotating-star dataset with mrcal: detect the
 corners (rotstar-detect; or take --corners corners.vnl), then run
 mrcal-calibrate-cameras with the board geometry from pattern.json, the
 imager size from the images and a focal seed from the boards. Every command
-is printed (stderr) before it runs; the model's path goes to stdout.
+is printed (stderr) before it runs; the model's path goes to stdout, what
+mrcal says about it to stderr and OUTDIR/calibration.json.
 
-The lens model defaults to mrcal's recommendation: a splined stereographic
-model of order 3 with Nx x Ny knots matched to the imager's aspect ratio and
-a field of view from the focal seed. It needs boards all over the imager
-(mrcal's dances have ~100 views); for a few poses use --lensmodel opencv8.
+The lens model ('auto', the default) follows mrcal's practice: the lean
+{cal.LEAN_LENSMODEL} first (the model of rotstar-detect's printed command);
+then, when >= {cal.SPLINED_MIN_BOARDS} boards cover >= {100 * cal.SPLINED_MIN_COVERAGE:.0f}% of the imager, mrcal's
+splined model too; the two are compared with mrcal's projection diff against
+their uncertainty, and the splined one is written only if it fits the
+corners clearly better and differs beyond the uncertainty.
+
+Checks: inputs that cannot give a model (fewer than {cal.MIN_BOARDS} boards, images of
+different sizes, a focal seed the boards disagree on, a splined model the
+boards cannot constrain) are refused before mrcal runs. A model with more
+than {100 * cal.MAX_OUTLIER_FRACTION:.0f}% outliers, an empty valid-intrinsics region, or lean and splined
+fits that disagree with no way to tell which is right, is not written
+(OUTDIR/camera-0.cameramodel is removed; the fits stay in OUTDIR/candidates/)
+unless --keep.
+
+Exit status: 0 a model was written and passed its checks (or --keep);
+1 the calibration ran and failed (mrcal failed, or the checks); 2 bad
+arguments or inputs that cannot give a model.
 """
 
 EPILOG = """\
 examples:
-  rotstar-calibrate seq/ --outdir cal/                 # detect, then calibrate (splined)
-  rotstar-calibrate seq/ --lensmodel opencv8 --weights # OPENCV8, per-corner weights
+  rotstar-calibrate seq/ --outdir cal/                 # detect, then calibrate (lean, splined if supported)
+  rotstar-calibrate seq/ --lensmodel opencv5 --weights # one given model, per-corner weights
   rotstar-calibrate seq/ --corners corners.vnl         # corners from rotstar-detect (or any detector)
 """
 
@@ -39,11 +54,11 @@ def parse_args(argv=None):
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("seq", help="dataset folder holding pattern.json and one folder per pose")
     p.add_argument("--corners", metavar="VNL", help="use this corners.vnl instead of detecting")
-    p.add_argument("--outdir", default="cal", help="where the model (camera-0.cameramodel) and the "
-                   "detected corners.vnl go (default cal)")
-    p.add_argument("--lensmodel", default="splined",
-                   help="'splined' (default: mrcal's recommended LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_...), "
-                        "'opencv8', or any mrcal LENSMODEL_... string")
+    p.add_argument("--outdir", default="cal", help="where the model (camera-0.cameramodel), calibration.json, "
+                   "the candidates' fits and the detected corners.vnl go (default cal)")
+    p.add_argument("--lensmodel", default="auto",
+                   help=f"'auto' (default: {cal.LEAN_LENSMODEL}, and mrcal's splined model when the boards "
+                        "support it), 'splined', 'opencv8', 'opencv5', ..., or any mrcal LENSMODEL_... string")
     p.add_argument("--knots-x", type=int, default=cal.DEFAULT_KNOTS_X,
                    help=f"splined model: knots across (Ny follows the aspect ratio; default {cal.DEFAULT_KNOTS_X})")
     p.add_argument("--focal", type=float, help="focal seed in pixels (default: estimated from the boards)")
@@ -55,83 +70,89 @@ def parse_args(argv=None):
     p.add_argument("--refine", choices=("symmetric", "opencv", "saddle"), default="symmetric",
                    help="refinement for the detection (rotstar-detect --refine; default symmetric)")
     p.add_argument("--jobs", "-j", type=int, default=1, help="poses detected in parallel (default 1)")
-    p.add_argument("--dry-run", action="store_true", help="print the mrcal command, do not run it")
+    p.add_argument("--keep", action="store_true", help="write the model even when its checks fail (exit 0)")
+    p.add_argument("--force", action="store_true",
+                   help="calibrate inputs the checks refuse (a splined model on few boards, a disputed focal seed)")
+    p.add_argument("--dry-run", action="store_true", help="print the first mrcal command, do not run it")
     return p.parse_args(argv)
 
 
-def resolve_lensmodel(spec: str, imagersize, focal: float, knots_x: int = cal.DEFAULT_KNOTS_X) -> str:
-    """'splined' / 'opencv8' / LENSMODEL_... -> the lens model string"""
-    s = spec.strip()
-    if s.lower() == "splined":
-        return cal.recommended_lensmodel(imagersize, focal, knots_x)
-    if s.lower() in ("opencv8", "opencv4", "opencv5", "opencv12", "pinhole", "stereographic"):
-        return "LENSMODEL_" + s.upper()
-    if not s.startswith("LENSMODEL_"):
-        raise ValueError(f"--lensmodel {spec!r}: use 'splined', 'opencv8' or an mrcal LENSMODEL_... string")
-    return s
+def _make_outdir(path: str) -> str | None:
+    """Create the output folder; a one-line reason when it cannot be"""
+    try:
+        os.makedirs(path, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        return f"--outdir {path}: a file is in the way (not a folder)"
+    except OSError as e:
+        return f"--outdir {path}: {e.strerror}"
+    return None
 
 
-def focal_seed(cs: CornerSet) -> float:
-    """estimate_focal over the boards of a corner set"""
-    return estimate_focal(list(cs.corners), cs.layout.board_points()[..., :2], cs.imagersize)
-
-
-def calibration_argv(cs: CornerSet, outdir: str, lensmodel: str, focal: float | None = None) -> list[str]:
-    """The mrcal-calibrate-cameras command for a corner set"""
-    focal = focal_seed(cs) if focal is None else focal
-    return cal.calibrate_argv(cs.vnl, cs.layout, cs.imagersize, focal, lensmodel, outdir,
-                              cal.image_glob(cs.files), weights=cs.weights)
-
-
-def summary_line(stats: dict) -> str:
-    return (f"{stats['boards']} boards, {stats['points']} corners, fit RMS {stats['rms_px']:.4f} px "
-            f"(2-D, unweighted), worst {stats['max_px']:.3f} px")
+def _detect(a) -> tuple[str | None, int]:
+    """Run rotstar-detect (the program, as printed) into OUTDIR/corners.vnl"""
+    vnl = os.path.join(a.outdir, "corners.vnl")
+    dargs = [a.seq, "-o", vnl, "--jobs", str(a.jobs), "--refine", a.refine] + (["--weights"] if a.weights else [])
+    say("$ " + cal.command_line(["rotstar-detect"] + dargs))
+    exe = os.path.join(os.path.dirname(sys.executable), "rotstar-detect")
+    if not os.path.exists(exe):
+        exe = "rotstar-detect"
+    rc = subprocess.run([exe, *dargs, "--no-hint"]).returncode
+    return (vnl if rc == 0 else None), rc
 
 
 def main(argv=None) -> int:
     a = parse_args(argv)
     try:
-        _, layout = dataset.read_pattern(a.seq)
+        dataset.read_pattern(a.seq)
     except dataset.DatasetError as e:
         say(f"rotstar-calibrate: {e}")
         return 2
-    os.makedirs(a.outdir, exist_ok=True)
+    if a.corners and not os.path.exists(a.corners):
+        say(f"rotstar-calibrate: {a.corners}: no such file")
+        return 2
+    err = _make_outdir(a.outdir)
+    if err:
+        say(f"rotstar-calibrate: {err}")
+        return 2
+    for stale in ("camera-0.cameramodel", "calibration.json"):  # a failed run leaves no old result behind
+        if os.path.exists(os.path.join(a.outdir, stale)):
+            os.remove(os.path.join(a.outdir, stale))
     vnl = a.corners
     if vnl is None:
-        from .detect import main as detect_main
-
-        vnl = os.path.join(a.outdir, "corners.vnl")
-        dargs = [a.seq, "-o", vnl, "--jobs", str(a.jobs), "--refine", a.refine] + (["--weights"] if a.weights else [])
-        say("$ " + cal.command_line(["rotstar-detect"] + dargs))
-        rc = detect_main(dargs + ["--no-hint"])
-        if rc != 0:
-            say("rotstar-calibrate: detection found no board; nothing to calibrate")
-            return 1
+        vnl, rc = _detect(a)
+        if vnl is None:
+            say("rotstar-calibrate: detection " + ("found no board; nothing to calibrate" if rc == 1 else "failed"))
+            return 1 if rc == 1 else 2
     try:
         cs = load_corner_set(vnl, pattern=a.seq, imagersize=a.imagersize, truth=False)
-        focal = a.focal or focal_seed(cs)
-        lensmodel = resolve_lensmodel(a.lensmodel, cs.imagersize, focal, a.knots_x)
-    except (SourceError, ValueError) as e:
+        if a.dry_run:
+            cal.check_inputs(cs)
+            f = a.focal or cal.focal_seed(cs, check=not a.force)
+            lm = cal.resolve_lensmodel(a.lensmodel, cs.imagersize, f, a.knots_x)
+            cal.check_inputs(cs, lm, a.force)
+            say("$ " + cal.command_line(cal.calibration_argv(cs, os.path.join(a.outdir, "candidates", "lean"), lm, f)))
+            return 0
+        c = cal.calibrate(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, keep=a.keep, force=a.force,
+                          log=lambda s: say(s if s.startswith("$ ") else f"rotstar-calibrate: {s}"))
+    except (SourceError, cal.InputError) as e:
         say(f"rotstar-calibrate: {e}")
         return 2
-    if "SPLINED" in lensmodel and len(cs.files) < cal.SPLINED_MIN_BOARDS:
-        say(f"rotstar-calibrate: warning: {len(cs.files)} boards for a splined model; it needs boards over "
-            f"the whole imager (>= ~{cal.SPLINED_MIN_BOARDS}); consider --lensmodel opencv8")
-    cmd = calibration_argv(cs, a.outdir, lensmodel, focal)
-    say("$ " + cal.command_line(cmd))
-    if a.dry_run:
-        return 0
-    try:
-        model = cal.run_calibration(cmd)
     except cal.CalibrationError as e:
         say(f"rotstar-calibrate: {e}")
         return 1
-    stats = cal.calibration_stats(model)
-    say(f"rotstar-calibrate: {summary_line(stats)}")
-    lens, intr = model.intrinsics()
-    say(f"rotstar-calibrate: {lens}, fx fy cx cy = {' '.join(f'{v:.2f}' for v in intr[:4])}")
-    print(os.path.join(a.outdir, "camera-0.cameramodel"))
-    return 0
+    for line in c.summary_lines():
+        say(f"rotstar-calibrate: {line}")
+    tmp = os.path.join(a.outdir, "calibration.json.tmp")
+    with open(tmp, "w") as f:
+        json.dump(c.to_json(), f, indent=1)
+        f.write("\n")
+    os.replace(tmp, os.path.join(a.outdir, "calibration.json"))
+    if c.failures:
+        say(f"rotstar-calibrate: {'kept despite: ' if c.kept else 'FAILED: '}" + "; ".join(c.failures)
+            + ("" if c.kept else " (no model written; --keep writes it anyway)"))
+    if c.model_path:
+        print(c.model_path)
+    return 0 if c.model_path else 1
 
 
 if __name__ == "__main__":

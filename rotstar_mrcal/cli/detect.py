@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shlex
 import sys
 
 from .. import dataset
@@ -62,17 +61,27 @@ def parse_args(argv=None):
     return p.parse_args(argv)
 
 
-def mrcal_command(layout, imagersize, focal, vnl_name, glob) -> str:
-    return " ".join([
-        "mrcal-calibrate-cameras",
-        "--corners-cache", shlex.quote(vnl_name),
-        "--lensmodel", "LENSMODEL_OPENCV8",
-        "--focal", f"{focal:.0f}",
-        "--imagersize", str(imagersize[0]), str(imagersize[1]),
-        *layout.mrcal_object_args(),
-        "--outdir", ".",
-        shlex.quote(glob),
-    ])
+def mrcal_command(layout, imagersize, focal, vnl_name, glob, weights=False) -> str:
+    """The mrcal-calibrate-cameras command to run next: rotstar-calibrate's lean model, one builder"""
+    from ..validate.calibrate import hint_command
+
+    return hint_command(layout, imagersize, focal, vnl_name, glob, weights)
+
+
+def corners_name(output) -> tuple[str, bool]:
+    """(the corners file to name in the hint, whether it is the real one): -o, or the file stdout goes to"""
+    if output:
+        return output, True
+    try:
+        import stat
+
+        if stat.S_ISREG(os.fstat(sys.stdout.fileno()).st_mode):
+            path = os.readlink(f"/proc/self/fd/{sys.stdout.fileno()}")
+            rel = os.path.relpath(path)
+            return (rel if not rel.startswith("..") else path), True
+    except (OSError, ValueError):
+        pass
+    return "corners.vnl", False
 
 
 def main(argv=None) -> int:
@@ -131,10 +140,12 @@ def _main(argv=None) -> int:
     focal = estimate_focal(found, layout.board_points()[..., :2], imagersize)
     first_frame = next(f["file"] for f in det.pattern["frames"] if f["kind"] == "rotstar")
     glob = os.path.join(a.seq, "*", first_frame)
-    cmd = mrcal_command(layout, imagersize, focal, a.output or "corners.vnl", glob)
-    if a.weights:
-        cmd = cmd.replace("--corners-cache ", "--corners-cache-has-weights --corners-cache ", 1)
+    vnl_name, real = corners_name(a.output)
+    cmd = mrcal_command(layout, imagersize, focal, vnl_name, glob, a.weights)
     if not a.no_hint:
+        if not real:
+            say("rotstar-detect: stdout is not a file: save the corners (rotstar-detect ... > corners.vnl, or -o) "
+                "and put that file's name for corners.vnl below")
         say("next, calibrate with:\n  " + cmd)
     return 0
 

@@ -13,7 +13,15 @@ SYNOPSIS
 Modules, one concept each:
 
     calibrate    the mrcal-calibrate-cameras command (lens model, focal seed,
-                 object geometry, image glob) and running it
+                 object geometry, image glob), running it, the inputs'
+                 checks, the lean-then-splined choice and the model's checks
+                 (calibrate(): a Calibration result with its JSON)
+    detection    a dataset's corners by several methods as corners.vnl files;
+                 one recording split into two interleaved groups
+    mrcalshow    mrcal's mrcal-show-* views of a calibration, with scales for
+                 our small errors and a gnuplot that reads PNG
+    modelcheck   rotstar-calibrate's default model against rotstar-detect's
+                 printed command on simulated captures (make calib-bench)
     heldout      the paper's metric: poses of a test set solved with the
                  intrinsics fixed, mean reprojection error
     uncertainty  mrcal's projection uncertainty on a grid over the imager

@@ -1,4 +1,4 @@
-"""The mrcal-calibrate-cameras command for a corners.vnl, and running it
+"""The mrcal-calibrate-cameras command for a corners.vnl, running it, and choosing the model
 
 SYNOPSIS
 
@@ -6,22 +6,58 @@ SYNOPSIS
     >>> from rotstar_mrcal.validate.calibrate import recommended_lensmodel, calibrate_argv, image_glob
     >>> recommended_lensmodel((1280, 800), focal=640)
     'LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=10_fov_x_deg=117'
+    >>> resolve_lensmodel("auto", (1280, 800), 640), resolve_lensmodel("opencv5", (1280, 800), 640)
+    ('LENSMODEL_OPENCV8', 'LENSMODEL_OPENCV5')
     >>> image_glob(["seq/pose000/rotstar_00.png", "seq/pose010/rotstar_00.png"])
     '*/rotstar_00.png'
     >>> argv = calibrate_argv("corners.vnl", make_layout(), (1280, 800), 640,
     ...                       "LENSMODEL_OPENCV8", "cal", "*/rotstar_00.png")
     >>> print(command_line(argv))
-    mrcal-calibrate-cameras --corners-cache corners.vnl --lensmodel LENSMODEL_OPENCV8 --focal 640 --imagersize 1280 800 --object-spacing 0.0144318182 --object-width-n 14 --object-height-n 9 --outdir cal '*/rotstar_00.png'
+    mrcal-calibrate-cameras --corners-cache corners.vnl --lensmodel LENSMODEL_OPENCV8 --focal 640 --imagersize 1280 800 --object-spacing 0.0144318182 --object-width-n 14 --object-height-n 9 --valid-intrinsics-region-parameters 5 0.05 2 3 0 --outdir cal '*/rotstar_00.png'
 
-The lens model: mrcal's recommendation (doc/how-to-calibrate.org, "Model
-choice") is LENSMODEL_SPLINED_STEREOGRAPHIC of order 3 with dense knots whose
-Ny/Nx matches the imager's aspect ratio and a field of view that covers the
-imager. The field of view comes from the focal seed: a stereographic lens of
-focal length f sees the half-width W/2 at 2 atan(W / 4f), so fov_x = 4 atan(W /
-4f); 10% is added so that the imager's edges are inside the spline. A splined
-model fits anything, and needs boards over the whole imager to do it: with a
-few poses (the demo's pose groups, or any dance of fewer than ~40 boards) use
-LENSMODEL_OPENCV8 (measured in doc/validation.md).
+    # the whole calibration, as rotstar-calibrate runs it:
+    cs = sources.load_corner_set("cal/corners.vnl", truth=False)
+    c = calibrate(cs, "cal")            # a Calibration; c.ok, c.reason, c.to_json()
+    print("\n".join(c.summary_lines()))
+
+The lens model. mrcal's practice (doc/how-to-calibrate.org, "Model
+choice", and the tour) is to fit a lean model first and a rich one when the
+data can constrain it, and to compare them. The default ('auto') here:
+
+1. LENSMODEL_OPENCV8, the lean model, on every board (LEAN_LENSMODEL; this is
+   also the model of rotstar-detect's printed command and of rotstar-crossval).
+2. mrcal's recommended LENSMODEL_SPLINED_STEREOGRAPHIC (order 3, dense knots
+   whose Ny/Nx follows the imager's aspect ratio, a field of view of
+   4 atan(W / 4f) + 10% from the focal seed f) only when the boards can
+   constrain it: at least SPLINED_MIN_BOARDS boards whose corners reach
+   SPLINED_MIN_COVERAGE of the cells of a knot-sized grid over the imager.
+3. Both are compared with mrcal.projection_diff against the sum of their
+   projection uncertainties. The splined model is written only when it
+   explains the corners clearly better (fit RMS below SPLINED_BETTER_RMS of
+   the lean one's) and the two differ beyond their uncertainty: the lean
+   model does not fit the lens. When the splined fit is no better, the lean
+   model is written (the splined one's extra freedom is not supported by the
+   boards). When they fit equally well but disagree, the check fails.
+
+Checks on the model written (Calibration.failures; rotstar-calibrate exits 1
+unless --keep): mrcal rejected more than MAX_OUTLIER_FRACTION of the corners
+as outliers, or the valid-intrinsics region is empty. Inputs that cannot
+give a model raise InputError before mrcal runs (check_inputs): fewer than
+MIN_BOARDS boards, images of different sizes, a focal seed that the boards
+do not agree on.
+
+The valid-intrinsics region: mrcal-calibrate-cameras computes it from the
+parameters (uncertainty, mean, stdev, count, distance); the region is the
+part of the imager where the projection uncertainty is below
+uncertainty*sigma, and, for a lean model, where in cells of a 30-wide grid
+the residuals' mean is below `mean` px, their spread below stdev*sigma and
+more than `count` corners were seen (sigma: the residuals' spread). mrcal's
+defaults (1, 0.5, 1.5, 3, 0) suit corners of ~0.3 px; with sigma of
+0.004-0.01 px an uncertainty below 1 sigma is found nowhere and the region
+comes out empty. VALID_REGION_PARAMETERS (5, 0.05, 2, 3, 0) asks for an
+uncertainty below 5 sigma (0.02-0.05 px for rotstar corners), a residual
+bias below 0.05 px, and the corner count and spread of mrcal's defaults (2
+sigma instead of 1.5).
 
 mrcal-calibrate-cameras matches the file names of the corners.vnl against the
 image globs (fnmatch, '*' also matches '/'); one glob per camera. The images
@@ -33,6 +69,7 @@ need not exist: the imager size is given. With a weight column (header
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 import runpy
@@ -45,17 +82,40 @@ import tempfile
 import mrcal
 import numpy as np
 
+LEAN_LENSMODEL = "LENSMODEL_OPENCV8"
+"""The lean model: rotstar-detect's printed command, rotstar-crossval, the first fit of rotstar-calibrate"""
+
 SPLINED_MIN_BOARDS = 40
 """Below this many boards a splined model is poorly constrained (doc/validation.md)"""
 
+SPLINED_MIN_COVERAGE = 0.9
+"""... and below this fraction of the knot grid's cells holding a corner"""
+
+SPLINED_BETTER_RMS = 0.8
+"""The splined model replaces the lean one only if its fit RMS is below this fraction of the lean one's"""
+
 DEFAULT_KNOTS_X = 16
 
-MIN_BOARDS = 3
-"""Fewer boards than this are not calibrated by rotstar-crossval (mrcal would, and badly)"""
+MIN_BOARDS = 4
+"""Fewer boards than this are not calibrated (mrcal would, and badly: one board gives a model 34 px off)"""
+
+MAX_OUTLIER_FRACTION = 0.02
+"""A calibration that rejects more of its corners than this fails its checks"""
+
+VALID_REGION_PARAMETERS = (5, 0.05, 2, 3, 0)
+"""mrcal-calibrate-cameras --valid-intrinsics-region-parameters for sub-0.05 px corners (module doc)"""
+
+FOCAL_MIN_BOARDS = 3
+FOCAL_MAX_SPREAD = 0.15
+"""The focal seed needs this many boards whose estimates agree to this (median absolute deviation / median)"""
 
 
 class CalibrationError(RuntimeError):
     """mrcal-calibrate-cameras failed; the message ends with its last output lines"""
+
+
+class InputError(ValueError):
+    """Inputs that cannot give a model (too few boards, mixed image sizes, no focal seed); one line"""
 
 
 def splined_fov_deg(imagersize, focal: float, margin: float = 1.1) -> int:
@@ -76,6 +136,24 @@ def recommended_lensmodel(imagersize, focal: float, knots_x: int = DEFAULT_KNOTS
     ny = max(2, int(round(knots_x * H / W)))
     return (f"LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx={knots_x}_Ny={ny}"
             f"_fov_x_deg={splined_fov_deg(imagersize, focal)}")
+
+
+def resolve_lensmodel(spec: str, imagersize, focal: float, knots_x: int = DEFAULT_KNOTS_X) -> str:
+    """'auto' / 'lean' / 'splined' / 'opencv8' / LENSMODEL_... -> the lens model string
+
+    'auto' and 'lean' give LEAN_LENSMODEL (rotstar-calibrate's 'auto' may
+    then add a splined model: calibrate()).
+    """
+    s = spec.strip()
+    if s.lower() in ("auto", "lean"):
+        return LEAN_LENSMODEL
+    if s.lower() == "splined":
+        return recommended_lensmodel(imagersize, focal, knots_x)
+    if s.lower() in ("opencv8", "opencv4", "opencv5", "opencv12", "pinhole", "stereographic"):
+        return "LENSMODEL_" + s.upper()
+    if not s.startswith("LENSMODEL_"):
+        raise InputError(f"--lensmodel {spec!r}: use 'auto', 'splined', 'opencv8' or an mrcal LENSMODEL_... string")
+    return s
 
 
 def image_glob(filenames) -> str:
@@ -125,6 +203,7 @@ def calibrate_argv(vnl: str, layout, imagersize, focal: float, lensmodel: str, o
         "--focal", f"{focal:.0f}",
         "--imagersize", str(int(imagersize[0])), str(int(imagersize[1])),
         *layout.mrcal_object_args(),
+        "--valid-intrinsics-region-parameters", *(f"{v:g}" for v in VALID_REGION_PARAMETERS),
         "--outdir", outdir,
         *extra,
         glob,
@@ -254,3 +333,396 @@ def calibration_stats(model: mrcal.cameramodel) -> dict:
         "max_px": float(np.max(e[ok])) if ok.any() else float("nan"),
         "focal_px": [float(v) for v in model.intrinsics()[1][:2]],
     }
+
+
+# ---------------------------------------------------------------------------
+# the inputs of a calibration, checked before mrcal runs
+# ---------------------------------------------------------------------------
+def png_size(path: str) -> tuple[int, int] | None:
+    """(width, height) from a PNG's header, None for another or unreadable file
+
+    SYNOPSIS
+
+        >>> import cv2, numpy as np, tempfile, os
+        >>> fn = os.path.join(tempfile.mkdtemp(), "a.png"); _ = cv2.imwrite(fn, np.zeros((8, 12), np.uint8))
+        >>> png_size(fn)
+        (12, 8)
+    """
+    try:
+        with open(path, "rb") as f:
+            head = f.read(24)
+    except OSError:
+        return None
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
+def focal_seed(cs, check: bool = True) -> float:
+    """The focal seed (pixels) of a corner set: the median of its boards' estimates
+
+    With check, an InputError unless at least FOCAL_MIN_BOARDS boards give an
+    estimate and they agree to FOCAL_MAX_SPREAD (median absolute deviation
+    over the median): a seed the boards do not support makes mrcal start
+    (and a splined model size its field of view) from a wrong focal length.
+    """
+    from ..focal import focal_estimates
+
+    est = focal_estimates(list(cs.corners), cs.layout.board_points()[..., :2], cs.imagersize)
+    W = cs.imagersize[0]
+    if not len(est):
+        if check:
+            raise InputError("no board constrains the focal length (give --focal)")
+        return W / 2
+    f = float(np.median(est))
+    spread = float(np.median(np.abs(est - f)) / f)
+    if check and (len(est) < FOCAL_MIN_BOARDS or spread > FOCAL_MAX_SPREAD or not 0.1 * W < f < 20 * W):
+        raise InputError(f"the boards do not support a focal seed ({len(est)} estimates, median {f:.0f} px, "
+                         f"spread {100 * spread:.0f}%; need >= {FOCAL_MIN_BOARDS} agreeing within "
+                         f"{100 * FOCAL_MAX_SPREAD:.0f}%): give --focal, or record more poses")
+    return f
+
+
+def check_inputs(cs, lensmodel: str | None = None, force: bool = False) -> None:
+    """InputError (one line) for a corner set that cannot give a model with this lens model
+
+    Always: at least MIN_BOARDS boards, and every image that can be read of
+    the corner set's imager size. Splined models (unless force): at least
+    SPLINED_MIN_BOARDS boards covering SPLINED_MIN_COVERAGE of the imager
+    (lensmodel None: not checked).
+    """
+    from .sources import resolve_image
+
+    n = len(cs.files)
+    if n < MIN_BOARDS:
+        raise InputError(f"{n} board{'s' * (n != 1)} in {cs.vnl}; a calibration needs at least {MIN_BOARDS} "
+                         "(more, at many tilts and over the whole imager, for a good one)")
+    sizes = {}
+    for f in cs.files:
+        size = png_size(resolve_image(f, cs.vnl))
+        if size is not None:
+            sizes.setdefault(size, []).append(f)
+    other = {s: fs for s, fs in sizes.items() if s != tuple(cs.imagersize)}
+    if other:
+        s, fs = next(iter(other.items()))
+        raise InputError(f"{len(fs)} image{'s' * (len(fs) != 1)} of size {s[0]}x{s[1]} (e.g. {fs[0]}) among "
+                         f"{cs.imagersize[0]}x{cs.imagersize[1]} ones: one calibration is one imager; "
+                         "remove them from the corners file or the dataset")
+    if lensmodel and "SPLINED" in lensmodel and not force:
+        ok, why = splined_supported(cs)
+        if not ok:
+            raise InputError(f"{why}; use the default model (--lensmodel auto) or --force to try anyway")
+
+
+def coverage(cs, knots_x: int = DEFAULT_KNOTS_X) -> float:
+    """Fraction of the cells of a knots_x-wide grid over the imager that hold a corner of some board"""
+    W, H = cs.imagersize
+    ny = max(2, int(round(knots_x * H / W)))
+    q = cs.corners.reshape(-1, 2)
+    q = q[np.isfinite(q).all(axis=1)]
+    ix = np.clip((q[:, 0] / W * knots_x).astype(int), 0, knots_x - 1)
+    iy = np.clip((q[:, 1] / H * ny).astype(int), 0, ny - 1)
+    return len(set(zip(ix.tolist(), iy.tolist()))) / (knots_x * ny)
+
+
+def splined_supported(cs, knots_x: int = DEFAULT_KNOTS_X) -> tuple[bool, str]:
+    """(can the boards constrain a splined model, why not)"""
+    n, c = len(cs.files), coverage(cs, knots_x)
+    if n < SPLINED_MIN_BOARDS or c < SPLINED_MIN_COVERAGE:
+        return False, (f"a splined model needs >= {SPLINED_MIN_BOARDS} boards covering >= "
+                       f"{100 * SPLINED_MIN_COVERAGE:.0f}% of the imager; these are {n} boards covering {100 * c:.0f}%")
+    return True, f"{n} boards covering {100 * c:.0f}% of the imager"
+
+
+def calibration_argv(cs, outdir: str, lensmodel: str, focal: float | None = None) -> list[str]:
+    """The mrcal-calibrate-cameras command for a corner set (sources.CornerSet)"""
+    focal = focal_seed(cs, check=False) if focal is None else focal
+    return calibrate_argv(cs.vnl, cs.layout, cs.imagersize, focal, lensmodel, outdir,
+                          image_glob(cs.files), weights=cs.weights)
+
+
+def hint_command(layout, imagersize, focal: float, vnl_name: str, glob: str, weights: bool = False) -> str:
+    """The command rotstar-detect prints: the lean model, the same builder as rotstar-calibrate's
+
+    SYNOPSIS
+
+        >>> from rotstar_mrcal.pattern.layout import make_layout
+        >>> print(hint_command(make_layout(), (1280, 800), 640, "corners.vnl", "seq/*/rotstar_00.png"))
+        mrcal-calibrate-cameras --corners-cache corners.vnl --lensmodel LENSMODEL_OPENCV8 --focal 640 --imagersize 1280 800 --object-spacing 0.0144318182 --object-width-n 14 --object-height-n 9 --valid-intrinsics-region-parameters 5 0.05 2 3 0 --outdir . 'seq/*/rotstar_00.png'
+    """
+    return command_line(calibrate_argv(vnl_name, layout, imagersize, focal, LEAN_LENSMODEL, ".", glob,
+                                       weights=weights))
+
+
+# ---------------------------------------------------------------------------
+# what a calibration says about itself
+# ---------------------------------------------------------------------------
+REGIONS = ("top-left", "top", "top-right", "left", "centre", "right", "bottom-left", "bottom", "bottom-right")
+
+
+def region_of(q, imagersize) -> np.ndarray:
+    """Index into REGIONS (thirds of the imager) of pixels q (..., 2)"""
+    W, H = imagersize
+    q = np.asarray(q, float)
+    ix = np.clip((q[..., 0] * 3 / W).astype(int), 0, 2)
+    iy = np.clip((q[..., 1] * 3 / H).astype(int), 0, 2)
+    return iy * 3 + ix
+
+
+def _pose_of_path(p: str) -> str:
+    return os.path.basename(os.path.dirname(str(p))) or str(p)
+
+
+def model_stats(model: mrcal.cameramodel, cs=None) -> dict:
+    """What a calibration reports about itself (JSON-able)
+
+    boards and corners used, outliers (mrcal's rejections: corners the input
+    had that the solve dropped; counted by imager region), the 2-D unweighted
+    fit RMS and worst residual (pose, corner, pixel), mrcal's noise estimate
+    sigma (per axis, of the weighted residuals), the 1-sigma projection
+    uncertainty (worst direction, at infinity) at the imager centre and
+    corners, and the valid-intrinsics region's share of the imager. cs (the
+    corner set the model was calibrated from) tells input gaps from outliers.
+    """
+    from .uncertainty import projection_uncertainty
+
+    oi = model.optimization_inputs()
+    lens, intr = model.intrinsics()
+    W, H = (int(v) for v in model.imagersize())
+    obs = oi["observations_board"]
+    e = board_residuals(model)
+    ok = np.isfinite(e)
+    ip = oi.get("imagepaths")
+    paths = [_pose_of_path(p) for p in (ip if ip is not None else [])]
+    if cs is not None and len(paths) == obs.shape[0]:
+        byname = dict(zip(cs.names, cs.corners))
+        given = np.stack([np.isfinite(byname[p]).all(axis=-1) if p in byname else np.ones(obs.shape[1:3], bool)
+                          for p in paths])
+    else:
+        given = np.ones(obs.shape[:3], bool)
+    outlier = given & (obs[..., 2] <= 0)
+    where = np.bincount(region_of(obs[..., :2][outlier], (W, H)), minlength=9)
+    stats = {
+        "lensmodel": lens,
+        "boards": int(obs.shape[0]),
+        "corners": int(ok.sum()),
+        "outliers": int(outlier.sum()),
+        "outlier_fraction": float(outlier.sum() / max(1, given.sum())),
+        "outliers_where": {r: int(c) for r, c in zip(REGIONS, where) if c},
+        "rms_px": float(np.sqrt(np.mean(e[ok] ** 2))) if ok.any() else float("nan"),
+        "worst_px": float(np.max(e[ok])) if ok.any() else float("nan"),
+        "sigma_px": float(np.std(mrcal.measurements_board(oi))),
+        "focal_px": [float(v) for v in intr[:2]],
+        "centre_px": [float(v) for v in intr[2:4]],
+    }
+    if ok.any():
+        b, i, j = np.unravel_index(np.nanargmax(np.where(ok, e, -1)), e.shape)
+        stats["worst_at"] = {"pose": paths[b] if len(paths) == obs.shape[0] else int(b), "corner": [int(j), int(i)],
+                             "pixel": [round(float(v), 1) for v in obs[b, i, j, :2]]}
+    q = np.array([[(W - 1) / 2, (H - 1) / 2], [0, 0], [W - 1, 0], [0, H - 1], [W - 1, H - 1]], float)
+    try:
+        u = projection_uncertainty(model, q)
+        stats["uncertainty_px"] = {"centre": float(u[0]), "corners_max": float(np.max(u[1:])),
+                                   "corners": [float(v) for v in u[1:]]}
+    except Exception as ex:  # noqa: BLE001 mrcal raises plain Exceptions
+        stats["uncertainty_px"] = {"error": str(ex).splitlines()[0] if str(ex) else type(ex).__name__}
+    vir = model.valid_intrinsics_region()
+    if vir is None:
+        stats["valid_region_fraction"] = None
+    else:
+        import cv2
+
+        stats["valid_region_fraction"] = (float(cv2.contourArea(np.asarray(vir, np.float32)) / (W * H))
+                                          if len(vir) >= 3 else 0.0)
+    return stats
+
+
+def stats_line(s: dict) -> str:
+    """One line of model_stats for people"""
+    where = ", ".join(f"{k} {v}" for k, v in s["outliers_where"].items())
+    u = s.get("uncertainty_px", {})
+    unc = (f"uncertainty {u['centre']:.4f} px at the centre, up to {u['corners_max']:.4f} at the corners"
+           if "centre" in u else f"uncertainty unknown ({u.get('error')})")
+    vr = s.get("valid_region_fraction")
+    at = s.get("worst_at", {})
+    return (f"{s['lensmodel']}: {s['boards']} boards, {s['corners']} corners, {s['outliers']} outliers"
+            + (f" ({where})" if where else "")
+            + f"; fit RMS {s['rms_px']:.5f} px (2-D), worst {s['worst_px']:.4f} px"
+            + (f" ({at.get('pose')} corner {at.get('corner')} at {at.get('pixel')})" if at else "")
+            + f"; {unc}; valid-intrinsics region "
+            + ("not computed" if vr is None else f"{100 * vr:.0f}% of the imager"))
+
+
+def model_failures(s: dict) -> list[str]:
+    """The checks a written model must pass; one reason per failure"""
+    out = []
+    if s["outlier_fraction"] > MAX_OUTLIER_FRACTION:
+        out.append(f"mrcal rejected {s['outliers']} of the corners as outliers ({100 * s['outlier_fraction']:.1f}% > "
+                   f"{100 * MAX_OUTLIER_FRACTION:.0f}%; where: "
+                   + ", ".join(f"{k} {v}" for k, v in s["outliers_where"].items()) + ")")
+    if s.get("valid_region_fraction") == 0.0:
+        out.append("the valid-intrinsics region is empty (no part of the imager is both seen and well "
+                   "constrained)")
+    return out
+
+
+@dataclasses.dataclass
+class Candidate:
+    """One model fitted by mrcal-calibrate-cameras"""
+
+    name: str  # 'lean' or 'splined'
+    lensmodel: str
+    command: str
+    path: str  # the model file mrcal wrote (under outdir/candidates/)
+    stats: dict | None = None
+    error: str | None = None  # mrcal failed
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclasses.dataclass
+class Calibration:
+    """The result of calibrate(): the model written (or not) and why; owns its JSON form"""
+
+    model_path: str | None  # outdir/camera-0.cameramodel when written
+    chosen: str | None  # name of the candidate written or proposed
+    reason: str  # why that one
+    failures: list[str]  # checks that failed (empty: ok)
+    kept: bool  # written despite failures (keep=True)
+    candidates: list[Candidate]
+    comparison: dict | None  # cross_validate(lean, splined).summary()
+    focal_seed: float
+    corners: str  # the corners.vnl
+
+    FORMAT = "rotstar-calibrate/1"
+
+    @property
+    def ok(self) -> bool:
+        return not self.failures
+
+    @property
+    def stats(self) -> dict | None:
+        c = self.candidate(self.chosen)
+        return c.stats if c else None
+
+    def candidate(self, name):
+        return next((c for c in self.candidates if c.name == name), None)
+
+    def to_json(self) -> dict:
+        return {"format": self.FORMAT, "ok": self.ok, "model": self.model_path, "chosen": self.chosen,
+                "reason": self.reason, "failures": self.failures, "kept": self.kept,
+                "focal_seed_px": self.focal_seed, "corners": self.corners, "comparison": self.comparison,
+                "candidates": [c.to_json() for c in self.candidates]}
+
+    def summary_lines(self) -> list[str]:
+        out = []
+        for c in self.candidates:
+            mark = "written" if c.name == self.chosen and self.model_path else (
+                "chosen" if c.name == self.chosen else "not written")
+            out.append(f"{c.name} ({mark}): " + (stats_line(c.stats) if c.stats else f"failed: {c.error}"))
+        if self.comparison:
+            k = self.comparison
+            out.append(f"lean vs splined: projection diff {k['diff_median_px']:.4f} px median (p95 "
+                       f"{k['diff_p95_px']:.3f}), uncertainty uA+uB {k['unc_median_px']:.4f} px, ratio "
+                       f"{k['ratio_median']:.2f} ({k['verdict']})")
+        out.append(f"model: {self.reason}")
+        return out
+
+
+def _atomic_copy(src: str, dst: str) -> None:
+    tmp = dst + ".tmp"
+    shutil.copyfile(src, tmp)
+    os.replace(tmp, dst)
+
+
+def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, knots_x: int = DEFAULT_KNOTS_X,
+              keep: bool = False, force: bool = False, in_process: bool = False, log=None) -> Calibration:
+    """Calibrate a corner set; write outdir/camera-0.cameramodel if its checks pass (or keep)
+
+    spec: 'auto' (lean, then splined when supported; module doc), or one
+    lens model (resolve_lensmodel). Raises InputError (before mrcal runs)
+    for inputs that cannot give a model, CalibrationError when mrcal fails
+    on the model that would be written. Every mrcal command goes to log (a
+    function of one line) before it runs. The candidates' models stay in
+    outdir/candidates/<name>/; outdir/camera-0.cameramodel is removed first
+    and written (atomically) only for a result.
+    """
+    from .crossval import cross_validate
+
+    log = log or (lambda s: None)
+    final = os.path.join(outdir, "camera-0.cameramodel")
+    for stale in [final, final + ".tmp"] + [os.path.join(outdir, "candidates", n, "camera-0.cameramodel")
+                                            for n in ("lean", "splined", "model")]:
+        if os.path.exists(stale):
+            os.remove(stale)
+    check_inputs(cs)  # the boards and the image sizes first: they decide whether anything can be done
+    f = focal_seed(cs, check=not force) if focal is None else float(focal)
+    lensmodel = resolve_lensmodel(spec, cs.imagersize, f, knots_x)
+    check_inputs(cs, lensmodel, force)
+    plan = [("lean" if spec.strip().lower() in ("auto", "lean") else "model", lensmodel)]
+    why = None
+    if spec.strip().lower() == "auto":
+        ok, why = splined_supported(cs, knots_x)
+        if ok:
+            plan.append(("splined", recommended_lensmodel(cs.imagersize, f, knots_x)))
+            log(f"splined model supported ({why}): fitting it after the lean one")
+        else:
+            log(f"lean model only: {why}")
+    cands = []
+    for name, lm in plan:
+        argv = calibration_argv(cs, os.path.join(outdir, "candidates", name), lm, f)
+        c = Candidate(name, lm, command_line(argv), os.path.join(outdir, "candidates", name, "camera-0.cameramodel"))
+        log("$ " + c.command)
+        try:
+            if os.path.exists(c.path):
+                os.remove(c.path)
+            model = run_calibration(argv, in_process=in_process)
+            c.stats = model_stats(model, cs)
+        except CalibrationError as e:
+            if not cands:
+                raise
+            c.error = str(e).splitlines()[0]
+        cands.append(c)
+    chosen, comparison = cands[0], None
+    if plan[0][0] != "lean":
+        reason = f"{chosen.lensmodel} (as asked)"
+    elif len(cands) == 1:
+        reason = f"{chosen.lensmodel} (the lean model" + (f"; {why}" if why else "") + ")"
+    else:
+        reason = f"{chosen.lensmodel} (the lean model; the splined fit failed: {cands[1].error})"
+    failures = list(model_failures(chosen.stats))
+    if len(cands) == 2 and cands[1].stats:
+        lean, spl = cands
+        ml, ms = mrcal.cameramodel(lean.path), mrcal.cameramodel(spl.path)
+        comparison = cross_validate(ml, ms).summary()
+        ratio, better = comparison["ratio_median"], spl.stats["rms_px"] < SPLINED_BETTER_RMS * lean.stats["rms_px"]
+        spl_fail = model_failures(spl.stats)
+        if better and ratio > 2 and not spl_fail:
+            chosen, failures = spl, []
+            reason = (f"{spl.lensmodel}: it fits the corners better than {lean.lensmodel} (RMS "
+                      f"{spl.stats['rms_px']:.5f} vs {lean.stats['rms_px']:.5f} px) and the two differ by "
+                      f"{comparison['diff_median_px']:.4f} px, {ratio:.1f}x their uncertainty: the lean model "
+                      "does not fit this lens")
+        elif better and ratio > 2:
+            failures = [f"{lean.lensmodel} does not fit (the splined model fits better and differs by "
+                        f"{comparison['diff_median_px']:.4f} px, {ratio:.1f}x the uncertainty) and the splined "
+                        "model fails its checks: " + "; ".join(spl_fail)]
+        elif ratio > 2 and spl.stats["rms_px"] <= lean.stats["rms_px"]:
+            failures.append(f"the lean and splined models disagree by {comparison['diff_median_px']:.4f} px "
+                            f"({ratio:.1f}x their uncertainty) and fit equally well: the boards cannot tell "
+                            "which is right")
+        elif ratio <= 2:
+            reason = (f"{lean.lensmodel}: the splined model agrees with it within {ratio:.1f}x their uncertainty "
+                      f"(RMS {spl.stats['rms_px']:.5f} vs {lean.stats['rms_px']:.5f} px): the lean model is enough")
+        else:
+            reason = (f"{lean.lensmodel}: the splined model fits the corners worse (RMS "
+                      f"{spl.stats['rms_px']:.5f} vs {lean.stats['rms_px']:.5f} px); its "
+                      f"{comparison['diff_median_px']:.4f} px difference is freedom the boards do not constrain")
+    written = None
+    if not failures or keep:
+        os.makedirs(outdir, exist_ok=True)
+        _atomic_copy(chosen.path, final)
+        written = final
+    return Calibration(written, chosen.name, reason, failures, bool(failures) and keep, cands, comparison, f,
+                       cs.vnl)

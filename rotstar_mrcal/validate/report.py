@@ -208,6 +208,11 @@ def detail(result) -> Table:
     return Table(header, rows, cap, bold)
 
 
+def _alt(caption: str) -> str:
+    """A caption as an image's alt text (no brackets, no command)"""
+    return caption.split(". Redraw:")[0].replace("[", "(").replace("]", ")")
+
+
 def markdown(results, title: str, figures=(), per_condition_figures=None, notes: str = "") -> str:
     """The report page. figures: [(caption, path)] after the headline; per_condition_figures:
     {label: [(caption, path)]} after each condition's table."""
@@ -228,7 +233,7 @@ def markdown(results, title: str, figures=(), per_condition_figures=None, notes:
             out += [f"Lens model: `{r['lensmodel']}`; groups: A = `{r.get('groups', {}).get('A', 'A')}`, "
                     f"B = `{r.get('groups', {}).get('B', 'B')}`.", ""]
         for cap, path in (per_condition_figures or {}).get(r["label"], []):
-            out += [f"![{cap}]({path})", "", f"*{cap}*", ""]
+            out += [f"![{_alt(cap)}]({path})", "", f"*{cap}*", ""]
         if r.get("commands"):
             out += ["<details><summary>commands run</summary>", "", "```"] + r["commands"] + ["```", "",
                                                                                               "</details>", ""]

@@ -146,3 +146,19 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
         tr = load_truth(seq)
         t = Truth(tr.model, tr.rt_cam_board)
     return CornerSet(vnl, layout, files, corners, size, vnl_has_weights(vnl), seq, t)
+
+
+def load_model(path: str, need_inputs: bool = False):
+    """mrcal.cameramodel(path), or a SourceError naming the file and the reason in one line"""
+    import mrcal
+
+    if not os.path.exists(path):
+        raise SourceError(f"{path}: no such file")
+    try:
+        m = mrcal.cameramodel(path)
+    except Exception:  # noqa: BLE001 mrcal raises a plain Exception listing every parser's complaint
+        raise SourceError(f"{path}: not a camera model mrcal can parse") from None
+    if need_inputs and not m.optimization_inputs():
+        raise SourceError(f"{path}: has no optimization_inputs (needed for the uncertainty); "
+                          "use a model written by mrcal-calibrate-cameras")
+    return m
