@@ -11,7 +11,7 @@ import sys
 from .. import dataset
 from ..validate import calibrate as cal
 from ..validate.sources import SourceError, load_corner_set
-from .common import say
+from .common import run, say
 
 DESCRIPTION = f"""\
 Calibrate a camera from a rotating-star dataset with mrcal: detect the
@@ -36,7 +36,7 @@ fits that disagree with no way to tell which is right, is not written
 (OUTDIR/camera-0.cameramodel is removed; the fits stay in OUTDIR/candidates/)
 unless --keep.
 
-Exit status: 0 a model was written and passed its checks (or --keep);
+Exit status (also 130: interrupted): 0 a model was written and passed its checks (or --keep);
 1 the calibration ran and failed (mrcal failed, or the checks); 2 bad
 arguments or inputs that cannot give a model.
 """
@@ -101,6 +101,10 @@ def _detect(a) -> tuple[str | None, int]:
 
 
 def main(argv=None) -> int:
+    return run("rotstar-calibrate", _main, argv)
+
+
+def _main(argv=None) -> int:
     a = parse_args(argv)
     try:
         dataset.read_pattern(a.seq)

@@ -17,7 +17,7 @@ from ..validate.cornersets import METHODS
 from ..validate.detection import detect_dataset as _detect_dataset
 from ..validate.detection import split_interleaved
 from ..validate.sources import SourceError, load_corner_set, load_model
-from .common import Progress, say
+from .common import Progress, run, say
 
 DESCRIPTION = """\
 Validate calibrations the way the rotating-star paper and mrcal do it.
@@ -52,7 +52,7 @@ one or more such folders into a report.
 The lens model defaults to rotstar-calibrate's lean model
 (LENSMODEL_OPENCV8, the model of rotstar-detect's printed command).
 
-Exit status: 0 done; 1 some corner set could not be calibrated (the others
+Exit status (also 130: interrupted): 0 done; 1 some corner set could not be calibrated (the others
 are reported); 2 bad arguments or inputs (a missing or unreadable model, a
 model of another imager size than the test corners).
 """
@@ -219,6 +219,10 @@ def _outdir_error(path: str) -> str | None:
 
 
 def main(argv=None) -> int:
+    return run("rotstar-crossval", _main, argv)
+
+
+def _main(argv=None) -> int:
     a = parse_args(argv)
     try:
         kinds = [_kind(p) for p in a.inputs]

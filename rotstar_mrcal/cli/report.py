@@ -8,7 +8,7 @@ import os
 import sys
 
 from ..validate import reportdir
-from .common import say
+from .common import run, say
 
 DESCRIPTION = """\
 Build the validation report from one or more rotstar-crossval output folders
@@ -27,7 +27,7 @@ each with the mrcal-show-* command that redraws it (stderr and the page).
 stdout: the headline table and the verdict (Markdown), for pasting;
 stderr: the files written and the mrcal-show-* commands.
 
-Exit status: 0 written; 2 bad arguments (an unreadable results.json,
+Exit status (also 130: interrupted): 0 written; 2 bad arguments (an unreadable results.json,
 duplicate labels, an --out that cannot be a folder).
 """
 
@@ -46,6 +46,10 @@ def parse_args(argv=None):
 
 
 def main(argv=None) -> int:
+    return run("rotstar-report", _main, argv)
+
+
+def _main(argv=None) -> int:
     a = parse_args(argv)
     try:
         loaded = [reportdir.load_results(p) for p in a.xval]
