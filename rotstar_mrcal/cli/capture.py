@@ -3,29 +3,23 @@
 from __future__ import annotations
 
 import argparse
-import collections
 import json
 import os
 import shutil
 import sys
 import time
 
-import cv2
 import numpy as np
 
 from .. import dataset
-from ..detect.display import dataset_offsets
-from ..capture import coverage
 from ..capture.backends import BACKENDS, describe_nodes, open_source
 from ..capture.d435 import DEFAULT_FPS, DEFAULT_FOURCC, DEFAULT_SIZE, format_warning
-from ..capture.motion import difference_signal, downsample, still_fraction
-from ..capture.pose import quick_check, value_scale, write_segmented
-from ..capture.segment import SegmentError, segment, threshold
-from ..capture.source import CaptureError, ControlError, FrameSource, record, skip
+from ..capture.session import OutputDataset, SessionOptions, capture_one, next_free_pose, wait_for_new_view
+from ..capture.source import CaptureError, ControlError, FrameSource, skip
 from ..display.loop import player_loop
 from ..display.player import DEFAULT_HOLD
-from .common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_INTERRUPTED, atomic_path, atomic_write, check_output_path, \
-    fail, run, say, size_arg
+from .common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_INTERRUPTED, atomic_write, check_output_path, fail, run, \
+    say, size_arg
 from .segment import add_segment_options, options_from
 
 DESCRIPTION = """\
@@ -174,137 +168,6 @@ def control(a, what: str, f, *args):
         return False
 
 
-def wait_for_new_view(src: FrameSource, tau: float, fps: float, still_s: float, need_motion: bool,
-                      step: int = 4) -> bool:
-    """Read frames until the view has moved (if need_motion) and then stayed still; False at the end of a replay"""
-    n = max(10, int(round(still_s * (fps or 25))))
-    window = collections.deque(maxlen=n + 1)
-    moved = not need_motion
-    while True:
-        f = src.read()
-        if f is None:
-            return False
-        window.append(downsample(f.image, step))
-        if len(window) < window.maxlen:
-            continue
-        d, _ = difference_signal(list(window), src.full_scale, step=1)
-        frac = still_fraction(d, tau)
-        if not moved and frac < 0.3:
-            moved = True
-        elif moved and frac >= 0.75:
-            return True
-
-
-def next_free_pose(folders: list[str]) -> int:
-    k = 0
-    while any(os.path.isdir(os.path.join(f, f"pose{k:03d}")) for f in folders):
-        k += 1
-    return k
-
-
-class Dataset:
-    """One output dataset (one exposure): its folder, corners so far, the value scale"""
-
-    def __init__(self, folder: str, exposure: int | None):
-        self.folder, self.exposure = folder, exposure
-        self.boards: list[np.ndarray] = []
-        self.shifts: dict = {}  # pose -> FrameShifts, for the display offsets over the session
-        self.imagersize = None
-        self.scale: float | None = None
-        self.tau: float | None = None  # stability threshold of the latest recording (for --auto)
-        self.log: list[dict] = []
-
-    @property
-    def label(self) -> str:
-        return f"{self.exposure} us" if self.exposure else ""
-
-    def what(self, pose: str) -> str:
-        """'pose003' or 'pose003 at 4000 us', for messages"""
-        return f"{pose} at {self.label}" if self.exposure else pose
-
-
-def capture_one(src, ds: Dataset, pose: str, pattern, layout, nframes: int, a, raw_dir: str) -> bool:
-    """Record, segment, write and check one pose into one dataset; True when a board was found
-
-    The recording goes to OUT/raw/<pose>[_exp<us>us].npy (a memory map, not
-    RAM: 275 Y16 frames of a D435 are 560 MB), removed after segmentation
-    unless --keep-raw.
-    """
-    os.makedirs(raw_dir, exist_ok=True)
-    tag = f"{pose}_exp{ds.exposure}us" if ds.exposure else pose
-    raw = os.path.join(raw_dir, tag + ".npy")
-    first = src.read()
-    if first is None:
-        raise EOFError
-    buf = np.lib.format.open_memmap(raw, mode="w+", dtype=first.image.dtype, shape=(nframes,) + first.image.shape)
-    try:
-        buf[0] = first.image
-        rec = record(src, nframes - 1, out=buf[1:]) if nframes > 1 else None
-        seqnums = np.r_[first.sequence, rec.sequence] if rec else np.array([first.sequence])
-        n = len(seqnums)
-        if a.keep_raw:
-            buf.flush()
-            with open(os.path.join(raw_dir, tag + ".json"), "w") as f:
-                json.dump({"sequence": [int(v) for v in seqnums], "fps": src.fps, "exposure_us": ds.exposure,
-                           "frames": n}, f)
-        if n < nframes:
-            say(f"rotstar-capture: {ds.what(pose)}: the source ended after {n} of {nframes} frames")
-        return process_recording(src, ds, pose, pattern, layout, buf[:n], seqnums, a)
-    finally:
-        del buf
-        if not a.keep_raw:
-            os.remove(raw)
-
-
-def process_recording(src, ds: Dataset, pose: str, pattern, layout, frames, seqnums, a) -> bool:
-    """Segment, check, write one recording; report on stderr; True when a board was found"""
-    opts = options_from(a)
-    entry = {"pose": pose, "exposure_us": ds.exposure, "frames": len(frames),
-             "dropped": int(np.sum(np.maximum(np.diff(seqnums) - 1, 0)))}
-    ds.log.append(entry)
-    try:
-        seg = segment(frames, pattern["frames"], layout, src.full_scale, opts)
-        ds.tau = seg.tau
-    except SegmentError as e:
-        d, _ = difference_signal(frames, src.full_scale, opts.step)
-        ds.tau = threshold(d, opts.k, opts.ratio)
-        say(f"rotstar-capture: {ds.what(pose)}: not usable: {e}")
-        entry.update(ok=False, error=str(e))
-        return False
-    if ds.scale is None:
-        ds.scale, note = value_scale(max(float(np.max(im)) for im in seg.images.values()), src.full_scale)
-        if note:
-            say(f"rotstar-capture: note{f' ({ds.label})' if ds.label else ''}: {note}")
-    r = quick_check(seg, layout, pattern, src.full_scale / ds.scale)  # the averages are not scaled yet
-    total = layout.nx * layout.ny
-    entry.update(summary=seg.summary(), drift_px=seg.loop.motion_px, found=r.found, corners=r.n_valid,
-                 error=r.error)
-    if not r.found:
-        say(f"rotstar-capture: {ds.what(pose)}: no board: {r.error}")
-        entry["ok"] = False
-        return False
-    folder = write_segmented(ds.folder, pose, seg, pattern, src.full_scale, ds.scale,
-                             {"exposure_us": ds.exposure, "dropped_camera_frames": entry["dropped"],
-                              "quick_check": {"corners": r.n_valid, "motion_px": r.motion_px}})
-    ds.boards.append(r.corners)
-    ds.imagersize = (frames.shape[2], frames.shape[1])
-    counts = coverage.coverage_counts(ds.boards, ds.imagersize)
-    with atomic_path(os.path.join(ds.folder, "coverage.png")) as tmp:
-        cv2.imwrite(tmp, coverage.coverage_image(ds.boards, ds.imagersize))
-    state = "complete" if r.n_valid == total else f"{total - r.n_valid} corner(s) missing"
-    if r.shifts is not None:
-        ds.shifts[pose] = r.shifts
-    display = dataset_offsets(ds.shifts)
-    motion = display.motion_px.get(pose, r.motion_px)
-    entry.update(motion_px=motion, display_offsets=None if display.offsets is None else display.offsets.tolist())
-    say(f"rotstar-capture: {ds.what(pose)}: board {state} ({r.n_valid}/{total}), frames agree to "
-        f"{motion:.3f} px beyond the display's offsets; {coverage.describe(counts)}")
-    say(f"rotstar-capture: {display.summary()}")
-    entry.update(ok=True, folder=folder)
-    print(folder, flush=True)
-    return True
-
-
 def main(argv=None, source: FrameSource | None = None) -> int:
     return run("rotstar-capture", lambda argv: _main(argv, source), argv)
 
@@ -328,7 +191,9 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
         src = source or open_source(a.backend, a.device, a.camera, a.fourcc, a.size, fps, a.serial)
     except CaptureError as e:
         fail(str(e), EXIT_FAILED)
-    datasets = [Dataset(os.path.join(a.out, f"exp{e}us"), e) for e in a.exposure] if a.exposure else [Dataset(a.out, None)]
+    datasets = ([OutputDataset(os.path.join(a.out, f"exp{e}us"), e) for e in a.exposure] if a.exposure
+                else [OutputDataset(a.out, None)])
+    opts = SessionOptions(options_from(a), a.keep_raw)
     raw_dir = os.path.join(a.out, "raw")
     interrupted = False
     log = {"format": "rotstar-capture/1", "started": time.strftime("%Y-%m-%d %H:%M:%S"), "argv": sys.argv[1:] if argv is None else list(argv)}
@@ -370,8 +235,12 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
                     if ds.exposure:
                         control(a, f"exposure {ds.exposure} us", src.set_exposure_us, ds.exposure)
                         skip(src, a.settle)
-                    ok = capture_one(src, ds, pose, pattern, layout, nframes, a, raw_dir)
-                    ok_any |= ok
+                    out = capture_one(src, ds, pose, pattern, layout, nframes, raw_dir, opts)
+                    for m in out.messages:
+                        say(f"rotstar-capture: {m}")
+                    if out.folder:
+                        print(out.folder, flush=True)
+                    ok_any |= out.ok
             except EOFError:
                 say("rotstar-capture: the recording ended")
                 break
@@ -397,11 +266,10 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
         if not a.keep_raw and os.path.isdir(raw_dir):
             shutil.rmtree(raw_dir, ignore_errors=True)
     for ds in datasets:
-        good = sum(1 for e in ds.log if e.get("ok"))
-        say(f"rotstar-capture: {ds.folder}: {good} pose(s) with a board; next: rotstar-detect {ds.folder} > corners.vnl")
+        say(f"rotstar-capture: {ds.folder}: {ds.good} pose(s) with a board; next: rotstar-detect {ds.folder} > corners.vnl")
     if interrupted:
         return EXIT_INTERRUPTED
-    return 0 if any(e.get("ok") for ds in datasets for e in ds.log) else EXIT_FAILED
+    return 0 if any(ds.good for ds in datasets) else EXIT_FAILED
 
 
 if __name__ == "__main__":

@@ -1,0 +1,194 @@
+"""A capture session: record a pose, split it into the displayed frames, check it, write it
+
+SYNOPSIS
+
+    from rotstar_mrcal.capture.session import OutputDataset, SessionOptions, capture_one
+    ds = OutputDataset("seq/exp4000us", 4000)
+    out = capture_one(src, ds, "pose000", pattern, layout, nframes, "seq/raw", SessionOptions())
+    out.ok, out.messages, out.folder      # a board was found; lines for the user; the pose folder
+    ds.display.summary()                  # the screen's per-frame offsets over the poses so far
+
+rotstar-capture drives these for every pose and exposure; nothing here
+prints. A recording goes to a memory map (275 Y16 frames of a D435 are
+560 MB), is segmented as rotstar-segment does (capture.segment), detected at
+once (capture.pose.quick_check), written as a pose folder of the dataset, and
+counted into the coverage of the imager and the display offsets of the
+session (detect.display: a pose whose frames moved against the others'
+offsets is a camera that moved).
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import json
+import os
+
+import cv2
+import numpy as np
+
+from ..detect.display import DisplayCheck, dataset_offsets
+from . import coverage
+from .motion import difference_signal, downsample, is_still
+from .pose import quick_check, value_scale, write_segmented
+from .segment import Options, SegmentError, segment, threshold
+from .source import FrameSource, record
+
+
+@dataclasses.dataclass
+class SessionOptions:
+    segment: Options = dataclasses.field(default_factory=Options)
+    keep_raw: bool = False  # keep OUT/raw/<pose>.npy (+ .json) after segmentation
+
+
+@dataclasses.dataclass
+class PoseOutcome:
+    """What one recording gave: a board or not, the lines to show, the pose folder written"""
+
+    ok: bool
+    messages: list[str]
+    folder: str | None = None
+
+
+class OutputDataset:
+    """One output dataset (one exposure): its folder, corners so far, value scale, display offsets"""
+
+    def __init__(self, folder: str, exposure: int | None):
+        self.folder, self.exposure = folder, exposure
+        self.boards: list[np.ndarray] = []
+        self.shifts: dict = {}  # pose -> FrameShifts
+        self.imagersize = None
+        self.scale: float | None = None
+        self.tau: float | None = None  # stability threshold of the latest recording (for --auto)
+        self.log: list[dict] = []
+
+    @property
+    def label(self) -> str:
+        return f"{self.exposure} us" if self.exposure else ""
+
+    def what(self, pose: str) -> str:
+        """'pose003' or 'pose003 at 4000 us', for messages"""
+        return f"{pose} at {self.label}" if self.exposure else pose
+
+    @property
+    def display(self) -> DisplayCheck:
+        return dataset_offsets(self.shifts)
+
+    @property
+    def good(self) -> int:
+        return sum(1 for e in self.log if e.get("ok"))
+
+
+def wait_for_new_view(src: FrameSource, tau: float, fps: float, still_s: float, need_motion: bool,
+                      step: int = 4) -> bool:
+    """Read frames until the view has moved (if need_motion) and then stayed still; False at the end
+
+    Still and moving are motion.is_still over the last still_s seconds: still
+    when 75 % of consecutive frames agree up to noise, moving below 30 %.
+    """
+    n = max(10, int(round(still_s * (fps or 25))))
+    window = collections.deque(maxlen=n + 1)
+    moved = not need_motion
+    while True:
+        f = src.read()
+        if f is None:
+            return False
+        window.append(downsample(f.image, step))
+        if len(window) < window.maxlen:
+            continue
+        d, _ = difference_signal(list(window), src.full_scale, step=1)
+        if not moved and not is_still(d, tau, 0.3):
+            moved = True
+        elif moved and is_still(d, tau, 0.75):
+            return True
+
+
+def next_free_pose(folders: list[str]) -> int:
+    """The first k such that no folder holds pose<k>"""
+    k = 0
+    while any(os.path.isdir(os.path.join(f, f"pose{k:03d}")) for f in folders):
+        k += 1
+    return k
+
+
+def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, layout, nframes: int, raw_dir: str,
+                opts: SessionOptions) -> PoseOutcome:
+    """Record nframes, then process_recording; raises EOFError when the source has nothing left
+
+    The recording goes to raw_dir/<pose>[_exp<us>us].npy, removed afterwards
+    unless opts.keep_raw.
+    """
+    os.makedirs(raw_dir, exist_ok=True)
+    tag = f"{pose}_exp{ds.exposure}us" if ds.exposure else pose
+    raw = os.path.join(raw_dir, tag + ".npy")
+    first = src.read()
+    if first is None:
+        raise EOFError
+    buf = np.lib.format.open_memmap(raw, mode="w+", dtype=first.image.dtype, shape=(nframes,) + first.image.shape)
+    try:
+        buf[0] = first.image
+        rec = record(src, nframes - 1, out=buf[1:]) if nframes > 1 else None
+        seqnums = np.r_[first.sequence, rec.sequence] if rec else np.array([first.sequence])
+        n = len(seqnums)
+        if opts.keep_raw:
+            buf.flush()
+            with open(os.path.join(raw_dir, tag + ".json"), "w") as f:
+                json.dump({"sequence": [int(v) for v in seqnums], "fps": src.fps, "exposure_us": ds.exposure,
+                           "frames": n}, f)
+        short = [f"{ds.what(pose)}: the source ended after {n} of {nframes} frames"] if n < nframes else []
+        out = process_recording(ds, pose, pattern, layout, buf[:n], seqnums, src.full_scale, opts)
+        out.messages[:0] = short
+        return out
+    finally:
+        del buf
+        if not opts.keep_raw:
+            os.remove(raw)
+
+
+def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frames: np.ndarray, seqnums: np.ndarray,
+                      full_scale: float, opts: SessionOptions) -> PoseOutcome:
+    """Segment, check and write one recording into ds; see the module doc"""
+    so = opts.segment
+    entry = {"pose": pose, "exposure_us": ds.exposure, "frames": len(frames),
+             "dropped": int(np.sum(np.maximum(np.diff(seqnums) - 1, 0)))}
+    ds.log.append(entry)
+    try:
+        seg = segment(frames, pattern["frames"], layout, full_scale, so)
+        ds.tau = seg.tau
+    except SegmentError as e:
+        d, _ = difference_signal(frames, full_scale, so.step)
+        ds.tau = threshold(d, so.k, so.ratio)
+        entry.update(ok=False, error=str(e))
+        return PoseOutcome(False, [f"{ds.what(pose)}: not usable: {e}"])
+    messages = []
+    if ds.scale is None:
+        ds.scale, note = value_scale(max(float(np.max(im)) for im in seg.images.values()), full_scale)
+        if note:
+            messages.append(f"note{f' ({ds.label})' if ds.label else ''}: {note}")
+    r = quick_check(seg, layout, pattern, full_scale / ds.scale)  # the averages are not scaled yet
+    total = layout.nx * layout.ny
+    entry.update(summary=seg.summary(), drift_px=seg.loop.motion_px, found=r.found, corners=r.n_valid,
+                 error=r.error)
+    if not r.found:
+        entry["ok"] = False
+        return PoseOutcome(False, messages + [f"{ds.what(pose)}: no board: {r.error}"])
+    folder = write_segmented(ds.folder, pose, seg, pattern, full_scale, ds.scale,
+                             {"exposure_us": ds.exposure, "dropped_camera_frames": entry["dropped"],
+                              "quick_check": {"corners": r.n_valid, "motion_px": r.motion_px}})
+    ds.boards.append(r.corners)
+    ds.imagersize = (frames.shape[2], frames.shape[1])
+    counts = coverage.coverage_counts(ds.boards, ds.imagersize)
+    png = os.path.join(ds.folder, "coverage.png")
+    tmp = os.path.join(ds.folder, ".coverage.png.tmp.png")
+    cv2.imwrite(tmp, coverage.coverage_image(ds.boards, ds.imagersize))
+    os.replace(tmp, png)
+    if r.shifts is not None:
+        ds.shifts[pose] = r.shifts
+    display = ds.display
+    motion = display.motion_px.get(pose, r.motion_px)
+    entry.update(ok=True, folder=folder, motion_px=motion,
+                 display_offsets=None if display.offsets is None else display.offsets.tolist())
+    state = "complete" if r.n_valid == total else f"{total - r.n_valid} corner(s) missing"
+    messages += [f"{ds.what(pose)}: board {state} ({r.n_valid}/{total}), frames agree to {motion:.3f} px beyond "
+                 f"the display's offsets; {coverage.describe(counts)}", display.summary()]
+    return PoseOutcome(True, messages, folder)
