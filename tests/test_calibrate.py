@@ -133,11 +133,9 @@ def test_calibrate_tries_splined_only_when_supported(tmp_path):
     vnl = corner_dataset(str(tmp_path / "d"), 44, seed=5, sigma=0.01)
     cs = load_corner_set(vnl)
     ok, why = cal.splined_supported(cs)
+    assert ok, why  # the premise: 44 random poses cover the imager (measured: 97%)
     lines = []
     c = cal.calibrate(cs, str(tmp_path / "cal"), in_process=True, log=lines.append)
-    if not ok:
-        assert [x.name for x in c.candidates] == ["lean"] and "lean model only" in lines[0]
-        pytest.skip(f"these poses do not support a splined model: {why}")
     assert [x.name for x in c.candidates] == ["lean", "splined"] and c.comparison is not None
     assert c.chosen in ("lean", "splined") and c.reason
     assert json.loads(json.dumps(c.to_json()))["comparison"]["verdict"] == c.comparison["verdict"]
