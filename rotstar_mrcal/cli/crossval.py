@@ -14,7 +14,8 @@ from .. import dataset
 from ..vnl import write_corners
 from ..validate import calibrate as cal
 from ..validate import compare, plots, report
-from ..validate.cornersets import DESCRIPTIONS, METHODS, detect_methods
+from ..methods import description
+from ..validate.cornersets import dataset_methods, detect_methods
 from ..validate.sources import SourceError, load_corner_set
 from .calibrate import calibration_argv, focal_seed, resolve_lensmodel
 from .common import Progress, say
@@ -46,7 +47,7 @@ one or more such folders into a report.
 """
 
 EPILOG = f"""\
-methods for --methods: {', '.join(METHODS)} (or 'all')
+methods for --methods: {', '.join(dataset_methods())} (or 'all')
 
 examples:
   rotstar-crossval cal/camera-0.cameramodel test-seq/
@@ -309,7 +310,7 @@ def mode_sets(a, sets: dict) -> int:
     methods_out = []
     for n in sets:
         if n in failed:
-            methods_out.append({"method": n, "description": DESCRIPTIONS.get(n, ""), "error": "; ".join(failed[n]),
+            methods_out.append({"method": n, "description": description(n), "error": "; ".join(failed[n]),
                                 "heldout": None, "crossval": None, "truth": None})
             continue
         e = evals[n]
@@ -330,7 +331,7 @@ def mode_sets(a, sets: dict) -> int:
             figs["maps"] = f"{n}-maps.png"
             fig.savefig(os.path.join(outdir, figs["maps"]), dpi=100)
             plt.close(fig)
-        methods_out.append({**e.summary, "description": DESCRIPTIONS.get(n, ""), "figures": figs,
+        methods_out.append({**e.summary, "description": description(n), "figures": figs,
                             "models": {s: os.path.relpath(model[n][s], outdir) for s in "AB"},
                             "corners": {"A": os.path.abspath(ca.vnl), "B": os.path.abspath(cb.vnl)}})
     per_pose = [(f"calibrated on A, tested on B ({a.label or ''})",
@@ -384,10 +385,11 @@ def main(argv=None) -> int:
                 if kinds != ["dataset", "dataset"]:
                     say("rotstar-crossval: --methods needs two dataset folders")
                     return 2
-                methods = list(METHODS) if a.methods == "all" else [m.strip() for m in a.methods.split(",")]
-                bad = [m for m in methods if m not in METHODS]
+                known = dataset_methods()
+                methods = known if a.methods == "all" else [m.strip() for m in a.methods.split(",")]
+                bad = [m for m in methods if m not in known]
                 if bad:
-                    say(f"rotstar-crossval: unknown methods {bad}; known: {', '.join(METHODS)}")
+                    say(f"rotstar-crossval: unknown methods {bad}; known: {', '.join(known)}")
                     return 2
                 va = detect_dataset(a.inputs[0], methods, a.outdir, "A", a.jobs)
                 vb = detect_dataset(a.inputs[1], methods, a.outdir, "B", a.jobs)
