@@ -101,7 +101,7 @@ class Refiner:
     refine: Callable  # (frames (K, H, W), starts (N, 2), window) -> (N, 2), NaN = failed
 
 
-REFINERS: dict[str, Refiner] = {r.name: r for r in (
+REFINERS = {r.name: r for r in (
     Refiner("symmetric", "rotstar", "the paper's point-symmetry fit (Eq. 1) on all frames jointly", refine_symmetric),
     Refiner("opencv", "checkerboard", "cv2.cornerSubPix (Forstner); on several frames, the mean of each frame's",
             refine_opencv),
@@ -226,7 +226,7 @@ class Method:
         return self.run(p, *self.args)
 
 
-METHODS: dict[str, Method] = {m.name: m for m in (
+METHODS = {m.name: m for m in (
     Method("rotstar", "rotstar (symmetric)", "rotstar", "own",
            "rotating-star frames, symmetric refinement (rotstar-detect)", _rotstar),
     Method("rotstar-weighted", "rotstar, weighted (--weights)", "rotstar", "own",

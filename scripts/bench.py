@@ -28,7 +28,6 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import dataclasses  # noqa: E402
 import datetime  # noqa: E402
 import json  # noqa: E402
 import shutil  # noqa: E402
@@ -68,12 +67,11 @@ def parse_args(argv=None):
     return a
 
 
-def main(argv=None) -> int:
-    a = parse_args(argv)
+def measure(a) -> dict:
+    """Render, detect, calibrate, score: everything the outputs are made of"""
     t0 = time.perf_counter()
     started = datetime.datetime.now().astimezone()
-    have_mrgingham = shutil.which("mrgingham") is not None
-    if not have_mrgingham:
+    if shutil.which("mrgingham") is None:
         log("note: mrgingham is not installed (Debian package 'mrgingham'); its rows are skipped")
     scene = scenes.make_scene(a.poses, a.seed, a.bits)
     poses = scenes.render_all(scene, max(1, a.jobs), log)
@@ -82,68 +80,63 @@ def main(argv=None) -> int:
         run = detection.detect_all(scene, poses, tmp, log)
         log("calibrating with mrcal from each method's boards")
         cal = calibration.calibrate_all(scene, run.labelled, run.weights, tmp, log)
-    # ---- speed: rotstar_mrcal.benchmark.speed plugs in here; its Markdown goes into `sections` below ----
-    speed_sections: list[str] = []
+    # ---- speed: rotstar_mrcal.benchmark.speed plugs in here; its Markdown goes into m["speed"] ----
+    speed: list[str] = []
+    layouts = {k: scene.layout_for(METHODS[k].needs) for k in run.results}
+    summary = {k: scoring.summarize(rows, layouts[k].nx * layouts[k].ny) for k, rows in run.results.items()}
+    g = scoring.goals(summary, run.results, {k: m.title for k, m in METHODS.items()},
+                      {k for k, m in METHODS.items() if m.start == "own"})
+    return dict(scene=scene, run=run, cal=cal, summary=summary, goals=g, speed=speed, started=started,
+                render=t_render, wall=time.perf_counter() - t0, machine=tables.machine())
 
-    results = run.results
-    layouts = {k: scene.layout_for(METHODS[k].needs) for k in results}
-    summary = {k: scoring.summarize(rows, layouts[k].nx * layouts[k].ny) for k, rows in results.items()}
-    titles = {k: m.title for k, m in METHODS.items()}
-    standalone = {k for k, m in METHODS.items() if m.start == "own"}
-    g = scoring.goals(summary, results, titles, standalone)
-    wall = time.perf_counter() - t0
-    mach = tables.machine()
-    tilts, dist = scene.tilts_deg(), scene.distances_m()
 
-    tab, gl, cal_tab = tables.accuracy_table(summary, run.memory), tables.goal_lines(g), tables.calibration_table(cal)
-    cal_title = (f"Calibration with mrcal ({calibration.CAL_LENSMODEL}) from each method's correct boards, "
-                 "against the true camera over the imager (at infinity, board poses aligned with the true ones):")
-    print("\n\n".join([tab, gl, *speed_sections, cal_title, cal_tab]))
-    sys.stdout.flush()
-
+def write_outputs(a, m: dict, text: dict) -> None:
+    """bench.md, bench.json, error-cdf.png into a.out"""
+    sc, run = m["scene"], m["run"]
     os.makedirs(a.out, exist_ok=True)
-    when = (f"{started:%Y-%m-%d %H:%M %Z}, {mach['cpu']}, {mach['cores']} cores; wall time {wall:.0f} s "
-            f"(rendering {t_render:.0f} s with {a.jobs} process(es))")
-    sections = ["# rotstar-mrcal benchmark", tables.setup_line(scene, tilts, dist, scenes.CAPTURES), when, tab, gl,
-                *speed_sections, cal_title, cal_tab,
-                "Poses a method did not get complete and right:\n\n" + tables.failures(results),
-                tables.notes(run.memory_pose, run.batch, a.poses, have_mrgingham)]
+    when = (f"{m['started']:%Y-%m-%d %H:%M %Z}, {m['machine']['cpu']}, {m['machine']['cores']} cores; wall time "
+            f"{m['wall']:.0f} s (rendering {m['render']:.0f} s with {a.jobs} process(es))")
+    md = ["# rotstar-mrcal benchmark", tables.setup_line(sc, sc.tilts_deg(), sc.distances_m(), scenes.CAPTURES), when,
+          text["table"], text["goals"], *m["speed"], text["cal_title"], text["cal_table"],
+          "Poses a method did not get complete and right:\n\n" + tables.failures(run.results),
+          tables.notes(run.memory_pose, run.batch, a.poses, "mrgingham" in run.results)]
     with open(os.path.join(a.out, "bench.md"), "w") as f:
-        f.write("\n\n".join(sections) + "\n")
-    doc = {
-        "format": "rotstar-bench/2",
-        "date": started.isoformat(timespec="seconds"),
-        "machine": mach,
-        "wall_seconds": wall,
-        "render_seconds": t_render,
-        "config": {"poses": a.poses, "seed": a.seed, "bits": a.bits, "jobs": a.jobs, "camera": "d435",
-                   "layout": [scene.layout.nx, scene.layout.ny], "square_layout": [scenes.SQUARE_N] * 2,
-                   "settings": dataclasses.asdict(scene.settings), "captures_averaged": scenes.CAPTURES,
-                   "match_px": scoring.MATCH_PX, "start_perturb_px": scoring.START_PERTURB_PX,
-                   "timing_cpu": run.cpu, "memory_pose": run.memory_pose},
-        "mrgingham_batch_seconds_per_image": run.batch,
-        "poses": [{"pose": i, "rt_cam_board": rt.tolist(), "tilt_deg": float(t), "distance_m": float(d)}
-                  for i, (rt, t, d) in enumerate(zip(scene.rts, tilts, dist))],
-        "methods": {k: {"name": titles[k], "input": tables.input_text(k), **summary[k],
-                        "memory": run.memory.get(k), "per_pose": results[k]} for k in results},
-        "goals": g,
-        "calibration": {"lensmodel": calibration.CAL_LENSMODEL, "methods": cal},
-    }
+        f.write("\n\n".join(md) + "\n")
+    doc = tables.bench_json(m["started"], m["machine"], m["wall"], m["render"], a.jobs, sc, run, m["summary"],
+                            m["goals"], m["cal"], calibration.CAL_LENSMODEL, scenes.CAPTURES)
     with open(os.path.join(a.out, "bench.json"), "w") as f:
         json.dump(doc, f, indent=1)
         f.write("\n")
-    plot_cdf(results, titles, os.path.join(a.out, "error-cdf.png"))
-    log(f"wrote {a.out}/bench.json, bench.md, error-cdf.png; wall time {wall:.0f} s")
+    plot_cdf(run.results, {k: v.title for k, v in METHODS.items()}, os.path.join(a.out, "error-cdf.png"))
+    log(f"wrote {a.out}/bench.json, bench.md, error-cdf.png; wall time {m['wall']:.0f} s")
 
+
+def write_docs(a, m: dict, text: dict) -> None:
+    """The marked blocks of doc/benchmark.md and README.md"""
+    sc, run = m["scene"], m["run"]
+    run_line = tables.run_line(m["started"], m["machine"], sc, sc.tilts_deg(), sc.distances_m(), m["wall"],
+                               m["render"], a.jobs)
+    result = "\n\n".join([run_line, text["table"], text["goals"], tables.batch_lines(run.batch, a.poses), *m["speed"]])
+    bench_md, readme = os.path.join(ROOT, "doc", "benchmark.md"), os.path.join(ROOT, "README.md")
+    for path, name, block in ((bench_md, "bench:result", result), (bench_md, "bench:calibration", text["cal_table"]),
+                              (readme, "bench:summary", tables.summary_sentence(m["summary"], m["cal"], a.poses))):
+        if rewrite_block(path, name, block):
+            log(f"rewrote the block {name} of {os.path.relpath(path)}")
+
+
+def main(argv=None) -> int:
+    a = parse_args(argv)
+    m = measure(a)
+    text = {"table": tables.accuracy_table(m["summary"], m["run"].memory), "goals": tables.goal_lines(m["goals"]),
+            "cal_title": f"Calibration with mrcal ({calibration.CAL_LENSMODEL}) from each method's correct boards, "
+                         "against the true camera over the imager (at infinity, board poses aligned with the true "
+                         "ones):",
+            "cal_table": tables.calibration_table(m["cal"])}
+    print("\n\n".join([text["table"], text["goals"], *m["speed"], text["cal_title"], text["cal_table"]]))
+    sys.stdout.flush()
+    write_outputs(a, m, text)
     if not a.no_docs and {"poses": a.poses, "seed": a.seed, "bits": a.bits} == DOCUMENTED:
-        run_line = tables.run_line(started, mach, scene, tilts, dist, wall, t_render, a.jobs)
-        result = "\n\n".join([run_line, tab, gl, tables.batch_lines(run.batch, a.poses), *speed_sections])
-        for path, name, text in ((os.path.join(ROOT, "doc", "benchmark.md"), "bench:result", result),
-                                 (os.path.join(ROOT, "doc", "benchmark.md"), "bench:calibration", cal_tab),
-                                 (os.path.join(ROOT, "README.md"), "bench:summary",
-                                  tables.summary_sentence(summary, cal, a.poses))):
-            if rewrite_block(path, name, text):
-                log(f"rewrote the block {name} of {os.path.relpath(path)}")
+        write_docs(a, m, text)
     return 0
 
 

@@ -79,18 +79,12 @@ def parse_args(argv=None):
     return p.parse_args(argv)
 
 
-def main(argv=None) -> int:
-    a = parse_args(argv)
+def corner_sets(a, out: str) -> tuple[dict, dict]:
+    """Steps 1-2: the pattern, every pose rendered and detected; ({exposure: {method: {group: vnl}}}, crops)"""
     from rotstar_mrcal.demo import capture, plots, scene, sets
-    from rotstar_mrcal.docblock import rewrite_block
     from rotstar_mrcal.methods import method_names
     from rotstar_mrcal.simulate.poses import centred_pose
 
-    t0 = time.monotonic()
-    out = os.path.abspath(a.out)
-    os.makedirs(out, exist_ok=True)
-    for k, _ in scene.EXPOSURES:  # a previous run's square-board images would be read by mrgingham again
-        shutil.rmtree(scene.exposure_dir(out, k), ignore_errors=True)
     pat = os.path.join(out, "pattern")
     run(["rotstar-pattern", "--out", pat], stdout=subprocess.DEVNULL)
     model, layout, square = scene.camera_and_boards(pat)
@@ -98,23 +92,20 @@ def main(argv=None) -> int:
     rts_sq = {g: centred_pose(v, layout, square) for g, v in rts.items()}
     npose = {g: len(v) for g, v in rts.items()}
     methods = method_names(needs=("rotstar", "checkerboard"), demo=True)
-    programs = method_names(needs="square", demo=True)
-
-    # ---- render and detect -------------------------------------------------
     log(f"rendering {sum(npose.values())} poses once, exposing and detecting at {len(scene.EXPOSURES)} exposures "
         f"({', '.join(methods)}) in {a.jobs} processes")
     res = capture.capture_all(a.jobs, layout, square, model, rts, rts_sq, a.seed, out, a.keep_images, methods, log)
-    corner_sets = {}
+    found = {}
     for label, _ in scene.EXPOSURES:
-        edir = scene.exposure_dir(out, label)
         for g in rts:
             per = {m: [res[(g, i)].found[label][m][:2] for i in range(npose[g])] for m in methods}
+            edir = scene.exposure_dir(out, label)
             for m, vnl in sets.write_group(edir, g, layout, model, rts[g], per, square, rts_sq[g]).items():
-                corner_sets.setdefault(label, {}).setdefault(m, {})[g] = vnl
+                found.setdefault(label, {}).setdefault(m, {})[g] = vnl
     if shutil.which("mrgingham"):
-        for name in programs:
+        for name in method_names(needs="square", demo=True):
             for (label, g), vnl in sets.program_sets(out, npose, name, log).items():
-                corner_sets[label].setdefault(name, {})[g] = vnl
+                found[label].setdefault(name, {})[g] = vnl
     else:
         log("demo: mrgingham not installed; its baseline is left out")
     crops = res[("B", 0)].crops
@@ -122,14 +113,19 @@ def main(argv=None) -> int:
         plots.exposure_figure(crops, os.path.join(out, "exposures.png"))
     with open(os.path.join(out, "setup.md"), "w") as f:
         f.write(scene.setup_notes(npose, scene.reach_px(model, layout, rts)))
+    return found, crops
 
-    # ---- calibrate, cross-validate, report --------------------------------
+
+def crossval_and_report(a, out: str, found: dict, crops: dict) -> tuple[str, str]:
+    """Steps 3-4: rotstar-crossval per exposure, rotstar-report over them; (report folder, its headline)"""
+    from rotstar_mrcal.demo import scene
+
     xdirs = []
     for label, _ in scene.EXPOSURES:
         xdir = os.path.join(scene.exposure_dir(out, label), "xval")
         cmd = ["rotstar-crossval", "--lensmodel", scene.LENSMODEL, "--label", label, "--outdir", short_path(xdir),
                "--jobs", str(a.jobs)]
-        for m, v in corner_sets[label].items():
+        for m, v in found[label].items():
             cmd += ["--set", m, short_path(v["A"]), short_path(v["B"])]
         run(cmd, stdout=subprocess.DEVNULL)
         xdirs.append(xdir)
@@ -140,18 +136,37 @@ def main(argv=None) -> int:
     if crops:
         cmd += ["--figure", short_path(os.path.join(out, "exposures.png"))
                 + ":Close-ups of one corner near the image corner at the three exposures"]
-    r = run(cmd, stdout=subprocess.PIPE, text=True)
+    return rep, run(cmd, stdout=subprocess.PIPE, text=True).stdout
+
+
+def write_docs(headline: str) -> None:
+    """The headline table into the marked blocks of README.md and doc/validation.md"""
+    from rotstar_mrcal.docblock import rewrite_block
+
+    table = "\n".join(line for line in headline.splitlines() if line.startswith("|"))
+    for path in (os.path.join(ROOT, "README.md"), os.path.join(ROOT, "doc", "validation.md")):
+        if rewrite_block(path, "demo:headline", table):
+            log(f"rewrote the block demo:headline of {os.path.relpath(path)}")
+
+
+def main(argv=None) -> int:
+    a = parse_args(argv)
+    from rotstar_mrcal.demo.scene import EXPOSURES, exposure_dir
+
+    t0 = time.monotonic()
+    out = os.path.abspath(a.out)
+    os.makedirs(out, exist_ok=True)
+    for k, _ in EXPOSURES:  # a previous run's square-board images would be read by mrgingham again
+        shutil.rmtree(exposure_dir(out, k), ignore_errors=True)
+    found, crops = corner_sets(a, out)
+    rep, headline = crossval_and_report(a, out, found, crops)
     print()
     print(f"rotstar-mrcal demo ({time.monotonic() - t0:.0f} s): report {os.path.join(rep, 'index.html')} "
           f"(also index.md)")
     print()
-    print(r.stdout.rstrip())
-
+    print(headline.rstrip())
     if not (a.no_docs or a.quick or a.seed != DEFAULT_SEED):
-        table = "\n".join(line for line in r.stdout.splitlines() if line.startswith("|"))
-        for path in (os.path.join(ROOT, "README.md"), os.path.join(ROOT, "doc", "validation.md")):
-            if rewrite_block(path, "demo:headline", table):
-                log(f"rewrote the block demo:headline of {os.path.relpath(path)}")
+        write_docs(headline)
     return 0
 
 

@@ -205,3 +205,32 @@ def run_line(started, mach: dict, scene, tilts, dist, wall: float, render: float
             f"{len(scene.rts)} poses, seed {st.seed}, {st.bits}-bit; tilts {tilts.min():.0f}-{tilts.max():.0f} "
             f"degrees, {dist.min():.2f}-{dist.max():.2f} m. Wall time {wall:.0f} s, of which rendering "
             f"{render:.0f} s with {jobs} process(es).")
+
+
+def bench_json(started, mach: dict, wall: float, render: float, jobs: int, scene, run, summary: dict,
+               goals: dict, cal: dict, cal_lensmodel: str, captures: int) -> dict:
+    """Everything of a run, for bench.json ('rotstar-bench/2'; methods keyed by their registry names)"""
+    import dataclasses
+
+    from .scoring import MATCH_PX, START_PERTURB_PX
+
+    st = scene.settings
+    tilts, dist = scene.tilts_deg(), scene.distances_m()
+    return {
+        "format": "rotstar-bench/2",
+        "date": started.isoformat(timespec="seconds"),
+        "machine": mach,
+        "wall_seconds": wall,
+        "render_seconds": render,
+        "config": {"poses": len(scene.rts), "seed": st.seed, "bits": st.bits, "jobs": jobs, "camera": "d435",
+                   "layout": [scene.layout.nx, scene.layout.ny], "square_layout": [scene.square.nx, scene.square.ny],
+                   "settings": dataclasses.asdict(st), "captures_averaged": captures, "match_px": MATCH_PX,
+                   "start_perturb_px": START_PERTURB_PX, "timing_cpu": run.cpu, "memory_pose": run.memory_pose},
+        "mrgingham_batch_seconds_per_image": run.batch,
+        "poses": [{"pose": i, "rt_cam_board": rt.tolist(), "tilt_deg": float(t), "distance_m": float(d)}
+                  for i, (rt, t, d) in enumerate(zip(scene.rts, tilts, dist))],
+        "methods": {k: {"name": METHODS[k].title, "input": input_text(k), **summary[k],
+                        "memory": run.memory.get(k), "per_pose": rows} for k, rows in run.results.items()},
+        "goals": goals,
+        "calibration": {"lensmodel": cal_lensmodel, "methods": cal},
+    }
