@@ -187,3 +187,38 @@ def test_docs_have_the_blocks_the_commands_write():
         with open(os.path.join(root, path)) as f:
             text = f.read()
         assert text.count(f"<!-- {name}:begin -->") == 1 and text.count(f"<!-- {name}:end -->") == 1, (path, name)
+
+
+# ---- the averaged checkerboard -------------------------------------------------
+def test_averaged_captures_divide_the_noise():
+    from rotstar_mrcal import simulate
+    from rotstar_mrcal.simulate.captures import averaged_captures, lit_box
+
+    E = np.full((60, 80), 0.02)
+    E[10:50, 20:60] = 0.5
+    rng = np.random.default_rng(0)
+
+    def expose(img):
+        return simulate.expose(img, gain=1.0, noise=0.01, bits=16, rng=rng)
+
+    one = expose(E).astype(float)
+    avg = averaged_captures(E, expose, 8)
+    assert avg.dtype == np.float32
+    ratio = np.std(one[10:50, 20:60]) / np.std(avg[10:50, 20:60])
+    assert 2.4 < ratio < 3.3  # sqrt(8) = 2.83
+    box = lit_box(E, margin=2)
+    assert box == ((8, 52), (18, 62))
+    roi = averaged_captures(E, expose, 8, roi=box)
+    assert 2.4 < np.std(one[10:50, 20:60]) / np.std(roi[10:50, 20:60]) < 3.3
+    assert 0.7 < np.std(one[:5]) / np.std(roi[:5]) < 1.4  # one capture outside the box
+
+
+def test_bench_driver_help():
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for script in ("bench.py", "demo.py"):
+        r = subprocess.run([sys.executable, os.path.join(root, "scripts", script), "--help"], capture_output=True,
+                           text=True)
+        assert r.returncode == 0 and "--no-docs" in r.stdout, script
