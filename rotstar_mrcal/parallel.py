@@ -1,89 +1,52 @@
-"""One pool of worker processes: a function mapped over items, results in order
+"""Work over processes that never outlive their parent
 
 SYNOPSIS
 
-    >>> from rotstar_mrcal.parallel import pool_map
-    >>> pool_map(abs, [-3, 1, -2], jobs=1)
-    [3, 1, 2]
-    >>> seen = []
-    >>> pool_map(abs, [-3, 1], jobs=1, progress=lambda i, r: seen.append((i, r)))
-    [3, 1]
-    >>> seen
-    [(0, 3), (1, 1)]
+    >>> from rotstar_mrcal.parallel import process_map
+    >>> sorted(process_map(pow, [(2, 3), (3, 2)], jobs=2))
+    [8, 9]
 
-With jobs > 1 the items go to `jobs` spawned processes (never forked: a
-fork of a process holding OpenCV or BLAS threads can hang), each set up once
-by initializer(*initargs), e.g. to build a large read-only state (a screen,
-a PSF) that every item uses. fn, the items and the results must pickle;
-progress(index, result) is called in the parent as each item finishes, in
-the order they finish. With jobs <= 1 (or a single item) everything runs in
-this process: initializer first, finalizer at the end (to drop that state).
-
-Ctrl-C or SIGTERM while the pool runs terminates the workers and raises
-KeyboardInterrupt (SIGTERM: SystemExit) in the caller; no worker is left
-behind.
+process_map yields fn(*a) for every a in args in the order they finish, from
+min(jobs, len(args)) worker processes. The workers ignore Ctrl-C (a terminal
+sends it to the whole process group; the parent handles it) and die at once
+on SIGTERM; on any exit from the loop (an error, Ctrl-C, SIGTERM in the
+parent, a consumer that stops early) they are terminated, none is left
+running. With jobs <= 1 everything runs in this process.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
-import contextlib
 import multiprocessing
 import signal
-import threading
 
 
-@contextlib.contextmanager
-def _sigterm_exits():
-    """While inside: SIGTERM raises SystemExit(143) in the main thread (so `finally` blocks run)"""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
-        raise SystemExit(128 + signum)
-
-    old = signal.signal(signal.SIGTERM, handler)
+def _worker_init(init=None, initargs=()) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
+        import cv2
+
+        cv2.setNumThreads(1)
+    except ImportError:  # pragma: no cover - OpenCV is a dependency
+        pass
+    if init is not None:
+        init(*initargs)
 
 
-def _terminate(ex: cf.ProcessPoolExecutor) -> None:
-    for p in list((getattr(ex, "_processes", None) or {}).values()):
-        p.terminate()
-    ex.shutdown(wait=False, cancel_futures=True)
+def _star(fa):
+    fn, a = fa
+    return fn(*a)
 
 
-def pool_map(fn, items, jobs: int = 1, initializer=None, initargs=(), progress=None, finalizer=None) -> list:
-    """[fn(item) for item in items], in `jobs` spawned processes; see the module doc"""
-    items = list(items)
-    out = [None] * len(items)
-    if jobs <= 1 or len(items) <= 1:
+def process_map(fn, args: list[tuple], jobs: int, initializer=None, initargs=()):
+    """Yield fn(*a) for a in args as they finish; see the module doc"""
+    args = list(args)
+    if jobs <= 1 or len(args) <= 1:
         if initializer is not None:
             initializer(*initargs)
-        try:
-            for i, x in enumerate(items):
-                out[i] = fn(x)
-                if progress is not None:
-                    progress(i, out[i])
-        finally:
-            if finalizer is not None:
-                finalizer()
-        return out
-    ex = cf.ProcessPoolExecutor(min(jobs, len(items)), mp_context=multiprocessing.get_context("spawn"),
-                                initializer=initializer, initargs=initargs)
-    with _sigterm_exits():
-        try:
-            futs = {ex.submit(fn, x): i for i, x in enumerate(items)}
-            for f in cf.as_completed(futs):
-                i = futs[f]
-                out[i] = f.result()
-                if progress is not None:
-                    progress(i, out[i])
-        except BaseException:
-            _terminate(ex)
-            raise
-    ex.shutdown()
-    return out
+        for a in args:
+            yield fn(*a)
+        return
+    ctx = multiprocessing.get_context("forkserver")  # no fork of a threaded parent (OpenCV, BLAS): it can deadlock
+    with ctx.Pool(min(jobs, len(args)), initializer=_worker_init, initargs=(initializer, initargs)) as pool:  # __exit__ terminates
+        yield from pool.imap_unordered(_star, [(fn, a) for a in args])

@@ -31,6 +31,7 @@ import argparse  # noqa: E402
 import datetime  # noqa: E402
 import json  # noqa: E402
 import shutil  # noqa: E402
+import signal  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -126,6 +127,7 @@ def write_docs(a, m: dict, text: dict) -> None:
 
 def main(argv=None) -> int:
     a = parse_args(argv)
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))  # workers stopped on the way out
     m = measure(a)
     text = {"table": tables.accuracy_table(m["summary"], m["run"].memory), "goals": tables.goal_lines(m["goals"]),
             "cal_title": f"Calibration with mrcal ({calibration.CAL_LENSMODEL}) from each method's correct boards, "

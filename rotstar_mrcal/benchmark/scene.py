@@ -33,7 +33,7 @@ import mrcal
 import numpy as np
 
 from .. import simulate
-from ..parallel import pool_map
+from ..parallel import process_map
 from ..pattern.layout import Layout, make_layout
 from ..simulate.captures import averaged_captures
 from ..simulate.poses import board_centre_m, centred_pose, tilt_angle
@@ -125,15 +125,17 @@ def render_all(scene: Scene, jobs: int, log=None) -> list[RenderedPose]:
     if log:
         log(f"rendering {n} poses ({jobs} process(es)): ray grid ...")
     rays = simulate.camera_rays(scene.model)
-    done = 0
-
-    def progress(i, p):
-        nonlocal done
-        done += 1
-        if log:
-            log(f"  pose {i:3d} rendered in {p.seconds:.1f} s ({done}/{n}, {time.perf_counter() - t0:.0f} s)")
-
-    return pool_map(render_pose, range(n), jobs, init_renderer, (scene, rays), progress, _W.clear)
+    out: list[RenderedPose | None] = [None] * n
+    try:
+        for done, p in enumerate(process_map(render_pose, [(i,) for i in range(n)], jobs, init_renderer,
+                                             (scene, rays)), 1):
+            out[p.index] = p
+            if log:
+                log(f"  pose {p.index:3d} rendered in {p.seconds:.1f} s ({done}/{n}, "
+                    f"{time.perf_counter() - t0:.0f} s)")
+    finally:
+        _W.clear()  # with jobs <= 1 the screens were set up in this process
+    return out
 
 
 def write_square_png(folder: str, p: RenderedPose, full_scale: float) -> str:

@@ -8,9 +8,9 @@ import shlex
 import sys
 
 from .. import dataset
+from ..detect.pipeline import REFINERS
 from ..detect.run import detect_dataset
 from ..focal import estimate_focal
-from ..methods import REFINERS
 from ..vnl import write_corners
 from .common import Progress, say
 
@@ -44,7 +44,7 @@ def parse_args(argv=None):
     p.add_argument("--window", type=float, default=10.0,
                    help="refinement half-window w in camera pixels (default 10); capped per corner "
                         "so the window stays inside its element")
-    p.add_argument("--refine", choices=list(REFINERS), default="symmetric",
+    p.add_argument("--refine", choices=REFINERS, default="symmetric",
                    help="symmetric: the paper's Eq. 1 on all rotating-star frames (default); "
                         "opencv: cv2.cornerSubPix on the checkerboard frame; "
                         "saddle: Lucchese-Mitra saddle fit on the checkerboard frame")

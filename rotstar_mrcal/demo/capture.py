@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from ..parallel import pool_map
+from ..parallel import process_map
 from .scene import CAPTURES, EXPOSURES, NOISE, SHOT, coma_psf, exposure_dir
 
 
@@ -118,15 +118,14 @@ def capture_all(jobs: int, layout, square, model, rts: dict, rts_square: dict, s
             for g in rts for i in range(len(rts[g]))]
     init = (layout, square, (model.intrinsics(), model.imagersize()), simulate.camera_rays(model))
     t = time.monotonic()
-    done = 0
-
-    def progress(_, r: PoseResult):
-        nonlocal done
-        done += 1
-        if log:
-            n_ok = sum(f[0] is not None for e in r.found.values() for f in e.values())
-            log(f"  {r.group} pose{r.index:03d}: {n_ok} of {len(r.found) * len(methods)} boards ({r.seconds:.1f} s; "
-                f"{done}/{len(todo)}, {time.monotonic() - t:.0f} s)")
-
-    res = pool_map(capture_pose, todo, jobs, init_worker, init, progress, _W.clear)
-    return {(r.group, r.index): r for r in res}
+    out = {}
+    try:
+        for r in process_map(capture_pose, [(j,) for j in todo], jobs, init_worker, init):
+            out[(r.group, r.index)] = r
+            if log:
+                n_ok = sum(f[0] is not None for e in r.found.values() for f in e.values())
+                log(f"  {r.group} pose{r.index:03d}: {n_ok} of {len(r.found) * len(methods)} boards "
+                    f"({r.seconds:.1f} s; {len(out)}/{len(todo)}, {time.monotonic() - t:.0f} s)")
+    finally:
+        _W.clear()  # with jobs <= 1 the worker state was set up in this process
+    return out

@@ -37,7 +37,7 @@ import dataclasses
 
 import numpy as np
 
-from ..methods import refiner
+from ..methods import REFINERS, refiner  # noqa: F401  (REFINERS: rotstar-detect --refine's choices)
 from ..pattern.layout import Layout
 from .boundaries import element_boundaries
 from .display import FrameShifts, frame_shifts, grid_homography, homography_jacobian

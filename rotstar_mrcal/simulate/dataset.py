@@ -53,7 +53,7 @@ import mrcal
 import numpy as np
 
 from .. import dataset as ds
-from ..parallel import pool_map
+from ..parallel import process_map
 from ..pattern.layout import Layout
 from .camera import RayGrid, camera_rays, remember_rays
 from .exposure import expose
@@ -175,8 +175,7 @@ def _setup(layout, frames, model_args, grid, settings, psf):
         cv2.setNumThreads(1)
 
 
-def _do_pose(job: tuple) -> tuple[str, float]:
-    seq, index, name, rt = job
+def _do_pose(seq: str, index: int, name: str, rt: np.ndarray) -> tuple[str, float]:
     t0 = time.perf_counter()
     st = _STATE
     imgs = render_pose(st["screen"], st["model"], rt, st["settings"], pose_rng(st["settings"].seed, index), st["psf"])
@@ -250,8 +249,12 @@ def write_dataset(
         if progress:
             progress(f"{name} ({done}/{len(names)}) {dt:.1f} s, {time.perf_counter() - t0:.0f} s total")
 
-    pool_map(_do_pose, [(seq, i, n, r) for i, (n, r) in enumerate(zip(names, shown))], jobs, _setup, init,
-             progress=lambda i, r: report(*r), finalizer=_STATE.clear)
+    try:
+        for r in process_map(_do_pose, [(seq, i, n, r) for i, (n, r) in enumerate(zip(names, shown))], jobs,
+                             _setup, init):
+            report(*r)
+    finally:
+        _STATE.clear()  # with jobs <= 1 the screen was set up in this process
     return truth
 
 
