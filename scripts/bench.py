@@ -10,12 +10,23 @@ SYNOPSIS
 Prints one Markdown table (stdout) with the goals evaluated beneath it; writes
 bench.json, bench.md and error-cdf.png into --out. Progress goes to stderr.
 A run with the documented settings (20 poses, seed 0, 16-bit) also rewrites
-the marked blocks of doc/benchmark.md and README.md (--no-docs: not).
+the marked blocks of --doc (doc/benchmark.md; '' for none) and README.md.
 
 The scene, the methods, the scoring, the timing and the memory are the
-package's: rotstar_mrcal.benchmark (scene, detection, scoring, timing,
-memory, calibration, tables, plots) over rotstar_mrcal.methods. See
-doc/benchmark.md.
+package's; this script only strings them together:
+
+    rotstar_mrcal.methods          the corner methods (one registry)
+    rotstar_mrcal.benchmark.scene        camera, layouts, poses; the rendered images of a pose
+    rotstar_mrcal.benchmark.detection    every method on every pose, timed on one CPU, scored
+    rotstar_mrcal.benchmark.scoring      a board against the truth, per-pose rows, summaries, goals
+    rotstar_mrcal.benchmark.timing       one pinned CPU, CPU and wall time of a call
+    rotstar_mrcal.benchmark.memory       the peak memory of one call, in a fresh process
+    rotstar_mrcal.benchmark.calibration  each method's boards calibrated with mrcal, against the truth
+    rotstar_mrcal.benchmark.speed        decode and detect time per pose, start-up, mrgingham, profile
+    rotstar_mrcal.benchmark.tables       the Markdown tables, bench.json, README's sentence
+    rotstar_mrcal.benchmark.plots        the corner error CDF
+
+See doc/benchmark.md.
 """
 
 from __future__ import annotations
@@ -41,6 +52,11 @@ from rotstar_mrcal.benchmark.plots import plot_cdf  # noqa: E402
 from rotstar_mrcal.docblock import rewrite_block  # noqa: E402
 from rotstar_mrcal.methods import METHODS  # noqa: E402
 
+try:  # the speed section (decode, detect, start-up, mrgingham) comes with the speed branch's merge
+    from rotstar_mrcal.benchmark import speed  # noqa: E402
+except ImportError:  # pragma: no cover
+    speed = None
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOCUMENTED = {"poses": 20, "seed": 0, "bits": 16}  # the run doc/benchmark.md shows
 
@@ -59,7 +75,9 @@ def parse_args(argv=None):
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="processes for rendering only; detectors are always timed on one core (default: all cores)")
     p.add_argument("--out", default="bench-out", help="folder for bench.json, bench.md, error-cdf.png")
-    p.add_argument("--no-docs", action="store_true", help="do not rewrite doc/benchmark.md and README.md")
+    p.add_argument("--doc", default=os.path.join(ROOT, "doc", "benchmark.md"),
+                   help="with the documented settings, rewrite the marked blocks of this file (results, "
+                        "calibration, speed) and README.md's summary (default: doc/benchmark.md; '' for none)")
     a = p.parse_args(argv)
     if a.quick:
         a.poses = 4
@@ -81,13 +99,16 @@ def measure(a) -> dict:
         run = detection.detect_all(scene, poses, tmp, log)
         log("calibrating with mrcal from each method's boards")
         cal = calibration.calibrate_all(scene, run.labelled, run.weights, tmp, log)
-    # ---- speed: rotstar_mrcal.benchmark.speed plugs in here; its Markdown goes into m["speed"] ----
-    speed: list[str] = []
+        speed_md, speed_run = "", None
+        if speed is not None:
+            speed_md, speed_run = speed.bench_speed(os.path.join(tmp, "speed-seq"), scene.layout,
+                                                    [(p.rotstar, p.checker) for p in poses], a.bits, log=log)
     layouts = {k: scene.layout_for(METHODS[k].needs) for k in run.results}
     summary = {k: scoring.summarize(rows, layouts[k].nx * layouts[k].ny) for k, rows in run.results.items()}
     g = scoring.goals(summary, run.results, {k: m.title for k, m in METHODS.items()},
                       {k for k, m in METHODS.items() if m.start == "own"})
-    return dict(scene=scene, run=run, cal=cal, summary=summary, goals=g, speed=speed, started=started,
+    return dict(scene=scene, run=run, cal=cal, summary=summary, goals=g, speed=[speed_md] if speed_md else [],
+                speed_run=speed_run, started=started,
                 render=t_render, wall=time.perf_counter() - t0, machine=tables.machine())
 
 
@@ -98,13 +119,15 @@ def write_outputs(a, m: dict, text: dict) -> None:
     when = (f"{m['started']:%Y-%m-%d %H:%M %Z}, {m['machine']['cpu']}, {m['machine']['cores']} cores; wall time "
             f"{m['wall']:.0f} s (rendering {m['render']:.0f} s with {a.jobs} process(es))")
     md = ["# rotstar-mrcal benchmark", tables.setup_line(sc, sc.tilts_deg(), sc.distances_m(), scenes.CAPTURES), when,
-          text["table"], text["goals"], *m["speed"], text["cal_title"], text["cal_table"],
+          text["table"], text["goals"], text["cal_title"], text["cal_table"],
           "Poses a method did not get complete and right:\n\n" + tables.failures(run.results),
-          tables.notes(run.memory_pose, run.batch, a.poses, "mrgingham" in run.results)]
+          tables.notes(run.memory_pose, run.batch, a.poses, "mrgingham" in run.results), *m["speed"]]
     with open(os.path.join(a.out, "bench.md"), "w") as f:
         f.write("\n\n".join(md) + "\n")
     doc = tables.bench_json(m["started"], m["machine"], m["wall"], m["render"], a.jobs, sc, run, m["summary"],
                             m["goals"], m["cal"], calibration.CAL_LENSMODEL, scenes.CAPTURES)
+    if m["speed_run"] is not None:
+        doc["speed"] = m["speed_run"]
     with open(os.path.join(a.out, "bench.json"), "w") as f:
         json.dump(doc, f, indent=1)
         f.write("\n")
@@ -113,14 +136,19 @@ def write_outputs(a, m: dict, text: dict) -> None:
 
 
 def write_docs(a, m: dict, text: dict) -> None:
-    """The marked blocks of doc/benchmark.md and README.md"""
+    """The marked blocks of --doc (result, calibration, speed) and README.md (summary)"""
     sc, run = m["scene"], m["run"]
-    run_line = tables.run_line(m["started"], m["machine"], sc, sc.tilts_deg(), sc.distances_m(), m["wall"],
-                               m["render"], a.jobs)
-    result = "\n\n".join([run_line, text["table"], text["goals"], tables.batch_lines(run.batch, a.poses), *m["speed"]])
-    bench_md, readme = os.path.join(ROOT, "doc", "benchmark.md"), os.path.join(ROOT, "README.md")
-    for path, name, block in ((bench_md, "bench:result", result), (bench_md, "bench:calibration", text["cal_table"]),
-                              (readme, "bench:summary", tables.summary_sentence(m["summary"], m["cal"], a.poses))):
+    tilts, dist = sc.tilts_deg(), sc.distances_m()
+    run_line = tables.run_line(m["started"], m["machine"], sc, tilts, dist, m["wall"], m["render"], a.jobs)
+    result = "\n\n".join([run_line, text["table"], text["goals"], tables.batch_lines(run.batch, a.poses)])
+    blocks = [(a.doc, "bench:result", result), (a.doc, "bench:calibration", text["cal_table"]),
+              (os.path.join(ROOT, "README.md"), "bench:summary", tables.summary_sentence(m["summary"], m["cal"],
+                                                                                          a.poses))]
+    if m["speed"]:
+        when = f"{m['started']:%Y-%m-%d %H:%M %Z}, {m['machine']['cpu']}, {m['machine']['cores']} cores"
+        setup = tables.setup_line(sc, tilts, dist, scenes.CAPTURES)
+        blocks.append((a.doc, "speed", f"{setup}.\n\n{when}.\n\n{m['speed'][0]}"))
+    for path, name, block in blocks:
         if rewrite_block(path, name, block):
             log(f"rewrote the block {name} of {os.path.relpath(path)}")
 
@@ -134,10 +162,10 @@ def main(argv=None) -> int:
                          "against the true camera over the imager (at infinity, board poses aligned with the true "
                          "ones):",
             "cal_table": tables.calibration_table(m["cal"])}
-    print("\n\n".join([text["table"], text["goals"], *m["speed"], text["cal_title"], text["cal_table"]]))
+    print("\n\n".join([text["table"], text["goals"], text["cal_title"], text["cal_table"], *m["speed"]]))
     sys.stdout.flush()
     write_outputs(a, m, text)
-    if not a.no_docs and {"poses": a.poses, "seed": a.seed, "bits": a.bits} == DOCUMENTED:
+    if a.doc and {"poses": a.poses, "seed": a.seed, "bits": a.bits} == DOCUMENTED:
         write_docs(a, m, text)
     return 0
 
