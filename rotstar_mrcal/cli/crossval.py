@@ -13,7 +13,7 @@ import numpy as np
 from .. import dataset
 from ..validate import calibrate as cal
 from ..validate import plots, report
-from ..validate.cornersets import METHODS
+from ..validate.cornersets import dataset_methods
 from ..validate.detection import detect_dataset as _detect_dataset
 from ..validate.detection import split_interleaved
 from ..validate.sources import SourceError, load_corner_set, load_model
@@ -58,7 +58,7 @@ model of another imager size than the test corners).
 """
 
 EPILOG = f"""\
-methods for --methods: {', '.join(METHODS)} (or 'all')
+methods for --methods: {', '.join(dataset_methods())} (or 'all')
 
 examples:
   rotstar-crossval cal/camera-0.cameramodel test-seq/
@@ -257,10 +257,11 @@ def _main(argv=None) -> int:
                 if kinds != ["dataset", "dataset"]:
                     say("rotstar-crossval: --methods needs two dataset folders")
                     return 2
-                methods = list(METHODS) if a.methods == "all" else [m.strip() for m in a.methods.split(",")]
-                bad = [m for m in methods if m not in METHODS]
+                known = dataset_methods()
+                methods = known if a.methods == "all" else [m.strip() for m in a.methods.split(",")]
+                bad = [m for m in methods if m not in known]
                 if bad:
-                    say(f"rotstar-crossval: unknown methods {bad}; known: {', '.join(METHODS)}")
+                    say(f"rotstar-crossval: unknown methods {bad}; known: {', '.join(known)}")
                     return 2
                 va = detect_dataset(a.inputs[0], methods, a.outdir, "A", a.jobs)
                 vb = detect_dataset(a.inputs[1], methods, a.outdir, "B", a.jobs)

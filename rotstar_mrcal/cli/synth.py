@@ -48,7 +48,7 @@ def _amplitudes(items):
 def parse_args(argv=None) -> argparse.Namespace:
     from ..synth.experiment import ABERRATIONS, Protocol
     from ..synth.patterns import PATTERNS
-    from ..synth.refiners import REFINERS
+    from ..methods import REFINERS
 
     d = Protocol()
     p = argparse.ArgumentParser(prog="rotstar-synth", description=__doc__.split("\n\n")[0].split(": ", 1)[1],
@@ -78,7 +78,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         q.add_argument("--alpha", nargs="+", type=float, default=list(d.alphas_deg), help="tilt-axis directions")
         q.add_argument("--repeats", type=number_arg(int, 1), default=d.repeats)
         q.add_argument("--patterns", nargs="+", choices=PATTERNS, default=list(d.patterns))
-        q.add_argument("--refiners", nargs="+", choices=REFINERS, default=list(d.refiners))
+        q.add_argument("--refiners", nargs="+", choices=sorted(REFINERS), default=list(d.refiners))
         q.add_argument("--perturb", type=float, default=d.perturb, help="start = truth + U(-p, p) in x and y, px")
         q.add_argument("--seed", type=int, default=d.seed)
 

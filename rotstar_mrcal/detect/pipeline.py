@@ -41,6 +41,7 @@ import dataclasses
 
 import numpy as np
 
+from ..methods import REFINERS, refiner  # noqa: F401  (REFINERS: rotstar-detect --refine's choices)
 from ..pattern.layout import Layout
 from .boundaries import element_boundaries
 from .display import FrameShifts, frame_shifts, grid_homography, homography_jacobian
@@ -51,7 +52,6 @@ from .response import binarize, response_map
 from .rough import rough_corners
 from .sequence import check_band_parity
 
-REFINERS = ("symmetric", "opencv", "saddle")
 LARGE_ELEMENT = 12.0  # px, inscribed half-size above which the curve intersection starts the refinement
 WINDOW_FRACTION = 0.65
 MIN_WINDOW = 2.0
@@ -256,22 +256,17 @@ def detect_pose(
         reasons[labels[:, 1], labels[:, 0]] = res.reason
         sigma[labels[:, 1], labels[:, 0]] = res.sigma
         cov[labels[:, 1], labels[:, 0]] = res.cov
-    elif refine in ("opencv", "saddle"):
+    elif refiner(refine).needs == "checkerboard":
         if checkerboard is None:
             return _fail(layout, f"--refine {refine} needs the checkerboard frame, which this pose lacks")
-        from . import baselines
-
         cb = np.asarray(checkerboard, np.float32)[y0:y1, x0:x1]  # the same crop as the frames
         wi = max(int(np.floor(np.median(w))), 2)
-        if refine == "opencv":
-            q = baselines.opencv_subpix(cb, rough, win=wi, full_scale=full_scale)
-        else:
-            q = baselines.saddle_refine(cb, rough, win=wi)
+        q = refiner(refine).refine(cb, rough, wi)
         ok = np.isfinite(q).all(axis=1) & (np.linalg.norm(q - rough, axis=1) <= w)
         q = np.where(ok[:, None], q, np.nan)
         reasons[labels[:, 1], labels[:, 0]] = np.where(ok, "", f"{refine} refinement failed")
     else:
-        raise ValueError(f"unknown refiner {refine!r}; choose one of {REFINERS}")
+        raise ValueError(f"refiner {refine!r} has no place in detect_pose")
 
     corners = np.full((layout.ny, layout.nx, 2), np.nan)
     corners[labels[:, 1], labels[:, 0]] = q + off

@@ -43,7 +43,6 @@ on how many processes render them.
 
 from __future__ import annotations
 
-import concurrent.futures
 import dataclasses
 import json
 import multiprocessing
@@ -54,6 +53,7 @@ import mrcal
 import numpy as np
 
 from .. import dataset as ds
+from ..parallel import process_map
 from ..pattern.layout import Layout
 from .camera import RayGrid, camera_rays, remember_rays
 from .exposure import expose
@@ -249,19 +249,12 @@ def write_dataset(
         if progress:
             progress(f"{name} ({done}/{len(names)}) {dt:.1f} s, {time.perf_counter() - t0:.0f} s total")
 
-    if jobs <= 1:
-        _setup(*init)
-        try:
-            for i, (n, r) in enumerate(zip(names, shown)):
-                report(*_do_pose(seq, i, n, r))
-        finally:
-            _STATE.clear()
-    else:
-        ctx = multiprocessing.get_context("spawn")
-        with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_setup, initargs=init) as ex:
-            futs = [ex.submit(_do_pose, seq, i, n, r) for i, (n, r) in enumerate(zip(names, shown))]
-            for f in concurrent.futures.as_completed(futs):
-                report(*f.result())
+    try:
+        for r in process_map(_do_pose, [(seq, i, n, r) for i, (n, r) in enumerate(zip(names, shown))], jobs,
+                             _setup, init):
+            report(*r)
+    finally:
+        _STATE.clear()  # with jobs <= 1 the screen was set up in this process
     return truth
 
 

@@ -82,7 +82,7 @@ class Protocol:
     alphas_deg: tuple = ALPHAS_DEG
     repeats: int = 50
     patterns: tuple = PATTERNS
-    refiners: tuple = REFINERS
+    refiners: tuple = tuple(sorted(REFINERS))  # every refiner; alphabetical, the published tables' order
     window: int = 10  # half-window of every refiner and of the bound
     supersample: int = 4
     captures: int = 8

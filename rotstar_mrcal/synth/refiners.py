@@ -4,8 +4,8 @@ SYNOPSIS
 
     >>> import numpy as np
     >>> from rotstar_mrcal.synth.refiners import REFINERS, refine
-    >>> REFINERS
-    ('opencv', 'saddle', 'symmetric')
+    >>> sorted(REFINERS)                      # the registry, rotstar_mrcal.methods
+    ['opencv', 'saddle', 'symmetric']
     >>> y, x = np.mgrid[0:30, 0:60].astype(float)
     >>> u = np.where(x < 30, x - 14.3, x - 44.3)            # two tiles, corner at (14.3, 15.6) in each
     >>> frames = (128 + 100 * np.tanh(u) * np.tanh(y - 15.6))[None]
@@ -37,24 +37,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..detect.baselines import opencv_subpix, saddle_refine
-from ..detect.refine import symmetric_refine
-
-REFINERS = ("opencv", "saddle", "symmetric")
+from ..methods import REFINERS, refiner
 
 
 def refine(name: str, frames: np.ndarray, starts: np.ndarray, window: int = 10) -> np.ndarray:
     """Refine starts (N, 2) on frames (K, H, W) with refiner `name`; (N, 2), NaN = failed"""
-    frames = np.asarray(frames, np.float32)
-    if frames.ndim == 2:
-        frames = frames[None]
-    starts = np.asarray(starts, float).reshape(-1, 2)
-    if name == "symmetric":
-        return symmetric_refine(frames, starts, window=window).corners
-    if name == "opencv":
-        per = np.stack([opencv_subpix(f, starts, win=int(window)) for f in frames])
-    elif name == "saddle":
-        per = np.stack([saddle_refine(f, starts, win=int(window)) for f in frames])
-    else:
-        raise ValueError(f"unknown refiner {name!r}; known: {', '.join(REFINERS)}")
-    return per.mean(axis=0)  # NaN in any frame -> NaN
+    return refiner(name).refine(frames, starts, window)
+
+
+__all__ = ["REFINERS", "refine"]

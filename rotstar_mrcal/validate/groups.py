@@ -29,7 +29,7 @@ import numpy as np
 from . import calibrate as cal
 from . import compare, plots
 from .calibrate import calibration_argv, focal_seed, resolve_lensmodel
-from .cornersets import DESCRIPTIONS
+from ..methods import description
 from .sources import SourceError, load_corner_set
 
 FORMAT = "rotstar-crossval/1"
@@ -172,7 +172,7 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
     methods_out = []
     for n in sets:
         if n in failed:
-            methods_out.append({"method": n, "description": DESCRIPTIONS.get(n, ""), "error": "; ".join(failed[n]),
+            methods_out.append({"method": n, "description": description(n), "error": "; ".join(failed[n]),
                                 "heldout": None, "crossval": None, "truth": None})
             continue
         e = evals[n]
@@ -193,7 +193,7 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
             figs["maps"] = f"{n}-maps.png"
             fig.savefig(os.path.join(outdir, figs["maps"]), dpi=100)
             plt.close(fig)
-        methods_out.append({**e.summary, "description": DESCRIPTIONS.get(n, ""), "figures": figs,
+        methods_out.append({**e.summary, "description": description(n), "figures": figs,
                             "models": {s: os.path.relpath(model[n][s], outdir) for s in "AB"},
                             "corners": {"A": os.path.abspath(ca.vnl), "B": os.path.abspath(cb.vnl)}})
     per_pose = [(f"calibrated on A, tested on B ({label or ''})",

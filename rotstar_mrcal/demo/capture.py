@@ -1,0 +1,131 @@
+"""One pose of the demo: rendered once, then per exposure its noise, every method's corners and the square board
+
+SYNOPSIS
+
+    results = capture_all(jobs, layout, square, model, rts, rts_square, seed, out, keep_images, methods, log)
+    results[("A", 0)].found["4000 us"]["saddle"]     # (corners or None, weights or None, why)
+    results[("B", 0)].crops                          # close-ups of one corner, per exposure
+
+Per exposure k of pose i of group g, the noise comes from
+default_rng([seed, ord(g), i, k]): one capture of each rotating-star frame,
+then CAPTURES captures of the checkerboard frame and of the square board
+averaged over the screen's part of the image (simulate.captures). The square
+board goes to <exposure>/<g>-square/poseNNN/checkerboard.png as 8 bits, for
+mrgingham; with keep_images every frame is written as a rotstar dataset.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+
+import numpy as np
+
+from ..parallel import process_map
+from .scene import CAPTURES, EXPOSURES, NOISE, SHOT, coma_psf, exposure_dir
+
+
+@dataclasses.dataclass
+class Job:
+    group: str
+    index: int
+    rt: np.ndarray
+    rt_square: np.ndarray
+    seed: int
+    out: str
+    keep_images: bool
+    methods: tuple  # rotstar_mrcal.methods names that run on the frames of one pose
+
+
+@dataclasses.dataclass
+class PoseResult:
+    group: str
+    index: int
+    found: dict  # exposure label -> method -> (corners or None, weights or None, why)
+    crops: dict  # exposure label -> (rotating-star crop, checkerboard crop), pose 0 only
+    seconds: float
+
+
+_W: dict = {}  # the worker's layouts, model, rays, PSF and screens (init_worker)
+
+
+def init_worker(layout, square, model_args, rays) -> None:
+    import cv2
+    import mrcal
+
+    from .. import simulate
+
+    cv2.setNumThreads(1)
+    model = mrcal.cameramodel(intrinsics=model_args[0], imagersize=model_args[1])
+    simulate.camera.remember_rays(model, rays)
+    cb = [f for f in square.frames() if f["kind"] == "checkerboard"]
+    _W.update(layout=layout, square=square, model=model, rays=rays, psf=coma_psf(model.imagersize()),
+              screen=simulate.make_screen(simulate.exact_frames(layout), layout),
+              screen_square=simulate.make_screen(simulate.exact_frames(square, cb), square))
+
+
+def capture_pose(job: Job) -> PoseResult:
+    """Render one pose once; per exposure: expose, detect every method, write the square board PNG"""
+    import cv2
+
+    from .. import dataset, simulate
+    from ..simulate.captures import averaged_captures, lit_box
+    from ..validate.cornersets import detect_methods
+
+    t0 = time.perf_counter()
+    layout, model = _W["layout"], _W["model"]
+    kw = dict(supersample=2, psf=_W["psf"], rays=_W["rays"])
+    E = simulate.render_irradiance(_W["screen"], model, job.rt, **kw)  # 8 rotating-star frames + checkerboard
+    Es = simulate.render_irradiance(_W["screen_square"], model, job.rt_square, **kw)[0]
+    pose = f"pose{job.index:03d}"
+    results, crops = {}, {}
+    truth = simulate.true_corners(model, layout, job.rt)
+    for k, (label, gain) in enumerate(EXPOSURES):
+        rng = np.random.default_rng([job.seed, ord(job.group), job.index, k])
+
+        def expose(img):
+            return simulate.expose(img, gain=gain, noise=NOISE, shot=SHOT, bits=16, rng=rng)
+
+        rot = expose(E[:-1])
+        cb = averaged_captures(E[-1], expose, CAPTURES, roi=lit_box(E[-1]))
+        sq = averaged_captures(Es, expose, CAPTURES, roi=lit_box(Es))
+        found = detect_methods(rot, layout, 65535.0, cb, job.methods)
+        results[label] = {m: (f.corners, f.weights, f.why) for m, f in found.items()}
+        edir = exposure_dir(job.out, label)
+        sqdir = os.path.join(edir, f"{job.group}-square", pose)
+        os.makedirs(sqdir, exist_ok=True)
+        cv2.imwrite(os.path.join(sqdir, "checkerboard.png"), np.clip(np.round(sq / 257.0), 0, 255).astype(np.uint8))
+        if job.keep_images:
+            dataset.write_pose(os.path.join(edir, job.group), pose,
+                               {f["file"]: img for f, img in zip(layout.frames(),
+                                                                 list(rot) + [np.round(cb).astype(np.uint16)])})
+        if job.index == 0:  # close-ups for the report: the corner nearest an image corner
+            d = np.linalg.norm(truth - (0, 0), axis=-1)
+            j, i = np.unravel_index(np.argmin(d), d.shape)
+            x, y = np.round(truth[j, i]).astype(int)
+            r = 20
+            crops[label] = (rot[1, y - r:y + r + 1, x - r:x + r + 1], cb[y - r:y + r + 1, x - r:x + r + 1])
+    return PoseResult(job.group, job.index, results, crops, time.perf_counter() - t0)
+
+
+def capture_all(jobs: int, layout, square, model, rts: dict, rts_square: dict, seed: int, out: str,
+                keep_images: bool, methods, log=None) -> dict:
+    """{(group, index): PoseResult} over every pose of every group, in `jobs` processes"""
+    from .. import simulate
+
+    todo = [Job(g, i, rts[g][i], rts_square[g][i], seed, out, keep_images, tuple(methods))
+            for g in rts for i in range(len(rts[g]))]
+    init = (layout, square, (model.intrinsics(), model.imagersize()), simulate.camera_rays(model))
+    t = time.monotonic()
+    out = {}
+    try:
+        for r in process_map(capture_pose, [(j,) for j in todo], jobs, init_worker, init):
+            out[(r.group, r.index)] = r
+            if log:
+                n_ok = sum(f[0] is not None for e in r.found.values() for f in e.values())
+                log(f"  {r.group} pose{r.index:03d}: {n_ok} of {len(r.found) * len(methods)} boards "
+                    f"({r.seconds:.1f} s; {len(out)}/{len(todo)}, {time.monotonic() - t:.0f} s)")
+    finally:
+        _W.clear()  # with jobs <= 1 the worker state was set up in this process
+    return out

@@ -1,0 +1,57 @@
+"""The demo's library (rotstar_mrcal.demo): pose groups, corner sets on disk, the figure"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from rotstar_mrcal import dataset, simulate
+from rotstar_mrcal.demo import plots, scene, sets
+from rotstar_mrcal.pattern.layout import make_layout
+from rotstar_mrcal.simulate.dataset import load_truth
+from rotstar_mrcal.vnl import read_corners
+
+
+def test_pose_groups_fit_and_b_reaches_farther():
+    model, layout = simulate.preset_model("d435"), make_layout()
+    rts = scene.group_poses(model, layout, tilts=(0, 60))
+    assert {g: v.shape for g, v in rts.items()} == {"A": (6, 6), "B": (6, 6)}
+    assert all(simulate.pose_ok(model, layout, rt, 20.0) for v in rts.values() for rt in v)
+    reach = scene.reach_px(model, layout, rts)
+    assert reach["B"] > reach["A"]
+    notes = scene.setup_notes({"A": 6, "B": 6}, reach)
+    assert "6 poses in A" in notes and scene.LENSMODEL in notes
+
+
+def test_write_group(tmp_path):
+    model = simulate.preset_model("pinhole-small")
+    layout = make_layout(screen=(800, 600), pitch=100, band=24)
+    square = make_layout(screen=(1000, 1000), pitch=100, band=24, nx=6, ny=6)
+    rts = simulate.random_poses(model, layout, 2, np.random.default_rng(0))
+    c = simulate.true_corners(model, layout, rts[0])
+    w = np.full(c.shape[:2], 2.0)
+    per = {"rotstar": [(c, w), (None, None)], "rotstar-weighted": [(c, w), (None, None)],
+           "saddle": [(c + 0.1, None), (None, None)]}
+    vnls = sets.write_group(str(tmp_path), "A", layout, model, rts, per, square, rts)
+    assert set(vnls) == set(per)
+    with open(vnls["rotstar"]) as f:
+        head = f.readline()
+        boards = read_corners(f, layout.nx, layout.ny)
+    assert head.split()[-1] == "level" and list(boards) == ["pose000/rotstar_00.png", "pose001/rotstar_00.png"]
+    assert np.allclose(boards["pose000/rotstar_00.png"], c, atol=1e-5) and boards["pose001/rotstar_00.png"] is None
+    with open(vnls["rotstar-weighted"]) as f:
+        assert f.readline().split()[-1] == "weight"  # the variant carries weights
+    with open(vnls["saddle"]) as f:
+        assert "pose000/checkerboard.png" in f.read()
+    for g, lay in (("A", layout), ("A-square", square)):
+        seq = os.path.join(tmp_path, g)
+        assert dataset.read_pattern(seq)[1].nx == lay.nx
+        assert load_truth(seq).poses == ["pose000", "pose001"]
+
+
+def test_exposure_figure(tmp_path):
+    crop = np.zeros((41, 41), np.uint16)
+    fn = str(tmp_path / "exposures.png")
+    plots.exposure_figure({label: (crop, crop) for label, _ in scene.EXPOSURES}, fn)
+    assert os.path.getsize(fn) > 1000
