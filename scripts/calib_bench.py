@@ -16,7 +16,8 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from rotstar_mrcal.validate.modelcheck import rewrite_block, run_case, table  # noqa: E402
+from rotstar_mrcal.docblock import rewrite_block  # noqa: E402
+from rotstar_mrcal.validate.modelcheck import run_case, table  # noqa: E402
 
 
 def figures_doc(work, n, seed, docdir, jobs):

@@ -1,6 +1,6 @@
 """The calib-bench table and the doc block it rewrites (validate/modelcheck); the runs themselves: make calib-bench"""
 
-from rotstar_mrcal.validate.modelcheck import TOLERANCE, printed_command, rewrite_block, table
+from rotstar_mrcal.validate.modelcheck import TOLERANCE, printed_command, table
 
 
 def test_printed_command_is_parsed():
@@ -21,9 +21,3 @@ def test_table_says_which_default_failed():
     assert "12 poses, rotstar-calibrate's reason: lean" in t
 
 
-def test_rewrite_block(tmp_path):
-    doc = tmp_path / "d.md"
-    doc.write_text("head\n<!-- x:begin -->\nold\n<!-- x:end -->\ntail\n")
-    assert rewrite_block(str(doc), "x", "new table")
-    assert doc.read_text() == "head\n<!-- x:begin -->\nnew table\n<!-- x:end -->\ntail\n"
-    assert not rewrite_block(str(doc), "y", "z")

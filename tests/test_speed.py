@@ -44,14 +44,6 @@ def test_speed_result_arithmetic():
     assert not g["ratio"]["pass"] and g["mrgingham"]["pass"]
 
 
-def test_write_block(tmp_path):
-    fn = tmp_path / "doc.md"
-    fn.write_text("# t\n\n<!-- speed:begin -->\nold\n<!-- speed:end -->\n\nafter\n")
-    assert speed.write_block(str(fn), "speed", "new\ntable\n")
-    assert fn.read_text() == "# t\n\n<!-- speed:begin -->\nnew\ntable\n<!-- speed:end -->\n\nafter\n"
-    assert not speed.write_block(str(fn), "other", "x")
-
-
 def test_write_dataset_round_trip(tmp_path):
     layout = make_layout(screen=(800, 600), pitch=100, band=24)
     rng = np.random.default_rng(0)

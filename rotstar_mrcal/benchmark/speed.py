@@ -6,7 +6,7 @@ SYNOPSIS
     r = speed.measure_speed("seq")          # a dataset folder (pattern.json + pose folders)
     print(r.table())                        # Markdown: decode, detect, ratio, start-up, mrgingham
     r.to_dict()                             # everything, for bench.json
-    speed.write_block("doc/benchmark.md", "speed", r.table())
+    rewrite_block("doc/benchmark.md", "speed", r.table())   # rotstar_mrcal.docblock
 
 Everything runs on one CPU (this process is pinned to one CPU for the
 measurement, and the child processes inherit it) with one OpenCV thread;
@@ -288,22 +288,6 @@ def profile_table(entries: list[dict]) -> str:
     for e in entries:
         lines.append(f"| `{e['function']}` | {e['calls']:.0f} | {e['own_ms']:.1f} | {e['cum_ms']:.1f} |")
     return "\n".join(lines)
-
-
-def write_block(path: str, name: str, text: str) -> bool:
-    """Replace the text between <!-- NAME:begin --> and <!-- NAME:end --> in a file
-
-    Returns False (and leaves the file alone) when the markers are missing.
-    """
-    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
-    with open(path) as f:
-        doc = f.read()
-    i, j = doc.find(begin), doc.find(end)
-    if i < 0 or j < i:
-        return False
-    with open(path, "w") as f:
-        f.write(doc[:i + len(begin)] + "\n" + text.strip("\n") + "\n" + doc[j:])
-    return True
 
 
 def write_dataset(folder: str, layout, poses: list[tuple[np.ndarray, np.ndarray | None]], bits: int) -> str:

@@ -144,18 +144,3 @@ def table(rows) -> str:
     out.append("")
     out += [f"- {r['poses']} poses, rotstar-calibrate's reason: {r['default'].get('reason') or '-'}" for r in rows]
     return "\n".join(out)
-
-
-def rewrite_block(path: str, name: str, text: str) -> bool:
-    """Replace the text between <!-- name:begin --> and <!-- name:end --> in a file; False if no markers"""
-    with open(path) as f:
-        doc = f.read()
-    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
-    if begin not in doc or end not in doc:
-        return False
-    head, rest = doc.split(begin, 1)
-    _, tail = rest.split(end, 1)
-    with open(path + ".tmp", "w") as f:
-        f.write(head + begin + "\n" + text.rstrip("\n") + "\n" + end + tail)
-    os.replace(path + ".tmp", path)
-    return True

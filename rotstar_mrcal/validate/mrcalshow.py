@@ -237,7 +237,7 @@ def uncertainty_doc(model: str, img_dir: str, doc: str, halves: tuple[str, str] 
     correction). names: {path: the name to show in the commands}. The PNGs go
     to img_dir, linked relative to the doc.
     """
-    from .modelcheck import rewrite_block
+    from ..docblock import rewrite_block
 
     figs = show_commands(model, img_dir, other=halves[0] if halves else None, image_root=image_root)
     if halves:  # the diff of the two halves, not of the model against half A
