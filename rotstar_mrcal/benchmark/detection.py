@@ -24,7 +24,6 @@ from __future__ import annotations
 import dataclasses
 import shutil
 
-import numpy as np
 
 from .. import simulate
 from ..detect.baselines import mrgingham_detect

@@ -20,7 +20,7 @@ from ..display.loop import player_loop
 from ..display.player import DEFAULT_HOLD
 from .common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_INTERRUPTED, atomic_write, check_output_path, fail, run, \
     say, size_arg
-from .segment import add_segment_options, options_from
+from .segment_args import add_segment_options, options_from
 
 DESCRIPTION = """\
 Record the rotating-star sequence that player.html loops on the screen, one

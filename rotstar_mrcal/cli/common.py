@@ -129,9 +129,6 @@ def run(prog: str, main_fn, argv=None) -> int:
             signal.signal(signal.SIGTERM, old)
 
 
-from ..parallel import process_map  # noqa: F401  (the commands' worker pool)
-
-
 # ---- output paths --------------------------------------------------------------------------
 def _inside(path: str, folder: str) -> bool:
     path, folder = os.path.realpath(path), os.path.realpath(folder)

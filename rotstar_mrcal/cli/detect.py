@@ -7,7 +7,8 @@ import os
 import sys
 
 from .. import dataset
-from ..detect.pipeline import MIN_WINDOW, REFINERS
+from ..detect.pipeline import MIN_WINDOW
+from ..methods import REFINERS
 from ..detect.run import detect_dataset
 from ..focal import estimate_focal
 from ..vnl import write_corners

@@ -175,7 +175,6 @@ def _knn_group(cnt_img, own_img, W, lo, base, aa, bb, half_axis, k, ratio, radiu
         used[active[~hit]] = cum[~hit, -1]
         h = np.flatnonzero(hit)
         if len(h):
-            r = np.arange(len(h))
             in_shell = (col[0][None, :] >= s_first[h, None]) & (col[0][None, :] < s_end[h, None])
             n_ab = np.where(in_shell, c_ab[h], 0).sum(axis=1)
             n_o = np.where(in_shell, c_o[h], 0).sum(axis=1)
@@ -188,7 +187,6 @@ def _knn_group(cnt_img, own_img, W, lo, base, aa, bb, half_axis, k, ratio, radiu
                 dab = np.where(np.isinf(da[h]) & inc_ab, sd, da[h])
                 dd3 = np.where(np.isinf(d3[h]) & inc_o, sd, d3[h])
                 val |= np.where(feasible, np.where(dd3 > ratio * dab, 1, 2), 0)
-            del r
             q = active[h]
             keep[q] = val == 1
             undecided[q] = val == 3

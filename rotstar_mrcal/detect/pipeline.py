@@ -41,7 +41,7 @@ import dataclasses
 
 import numpy as np
 
-from ..methods import REFINERS, refiner  # noqa: F401  (REFINERS: rotstar-detect --refine's choices)
+from ..methods import refiner
 from ..pattern.layout import Layout
 from .boundaries import element_boundaries
 from .display import FrameShifts, frame_shifts, grid_homography, homography_jacobian
