@@ -246,7 +246,7 @@ def test_match_to_reference(board, n):
     truth = board_truth(board_homography(SHAPE, nx, ny), nx, ny)
     noisy = truth + np.random.default_rng(2).normal(0, 0.1, truth.shape)
     names = []
-    for name, g in B.grid_symmetries(noisy):
+    for name, g in B.relabelled_boards(noisy):
         if g.shape != truth.shape:
             continue
         m, got = B.match_to_reference(g, truth, 1.0, return_name=True)

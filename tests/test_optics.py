@@ -196,7 +196,7 @@ def test_bound_is_a_floor_for_the_symmetric_refiner():
     """Monte Carlo: the refiner's RMS error over noisy repeats is >= the bound, and within 2x of it"""
     from rotstar_mrcal.detect.refine import symmetric_refine
     from rotstar_mrcal.synth.patterns import Star
-    from rotstar_mrcal.synth.render import ViewRenderer
+    from rotstar_mrcal.synth.imaging import ViewRenderer
 
     s, T, W, C, sig = 4, 30, 10, 200.0, 6.0
     apex = np.array((15.3, 14.7))

@@ -18,7 +18,7 @@ from rotstar_mrcal.synth.experiment import ABERRATIONS, SYMMETRIC, Protocol, qui
 from rotstar_mrcal.synth.metrics import pairwise_range
 from rotstar_mrcal.synth.patterns import Star, pattern_frames
 from rotstar_mrcal.synth.refiners import refine
-from rotstar_mrcal.synth.render import ViewRenderer, star_coverage, star_edge_measure
+from rotstar_mrcal.synth.imaging import ViewRenderer, star_coverage, star_edge_measure
 from rotstar_mrcal.synth.sweep import cache_path, pending_tasks, run_sweep
 from rotstar_mrcal.synth.views import tilt_rotation, view_jacobian
 

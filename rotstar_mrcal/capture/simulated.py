@@ -41,7 +41,7 @@ import numpy as np
 
 from ..display.loop import player_loop
 from ..simulate.exposure import expose
-from ..simulate.render import render_irradiance
+from ..simulate.irradiance import render_irradiance
 from ..simulate.screen import exact_frames, make_screen
 
 

@@ -110,8 +110,7 @@ def run(prog: str, main_fn, argv=None) -> int:
 
     SYNOPSIS
 
-        >>> run("rotstar-x", lambda argv: fail("seq/pattern.json: grid.nx is 0"))  # doctest: +SKIP
-        rotstar-x: seq/pattern.json: grid.nx is 0
+        >>> run("rotstar-x", lambda argv: fail("seq/pattern.json: grid.nx is 0"))  # stderr: the message
         2
     """
     main_thread = threading.current_thread() is threading.main_thread()  # (signal handlers live there)

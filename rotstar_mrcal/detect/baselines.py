@@ -52,7 +52,7 @@ __all__ = [
     "opencv_subpix",
     "opencv_find_chessboard",
     "match_to_reference",
-    "grid_symmetries",
+    "relabelled_boards",
     "saddle_refine",
     "cone_kernel",
     "mrgingham_detect",
@@ -218,16 +218,16 @@ def opencv_find_chessboard(image, nx: int, ny: int, full_scale: float = 255.0,
 # ---------------------------------------------------------------------------
 # relabelling
 # ---------------------------------------------------------------------------
-def grid_symmetries(corners: np.ndarray):
+def relabelled_boards(corners: np.ndarray):
     """The 8 relabellings of a (rows, cols, ...) grid by the dihedral group
 
     SYNOPSIS
 
         >>> import numpy as np
-        >>> names = [name for name, g in grid_symmetries(np.zeros((3, 4, 2)))]
+        >>> names = [name for name, g in relabelled_boards(np.zeros((3, 4, 2)))]
         >>> names[:4]
         ['identity', 'flip_x', 'flip_y', 'rot180']
-        >>> [g.shape for name, g in grid_symmetries(np.zeros((3, 4, 2)))][4]
+        >>> [g.shape for name, g in relabelled_boards(np.zeros((3, 4, 2)))][4]
         (4, 3, 2)
 
     Yields (name, view): the four flips of the array, then the same applied
@@ -273,7 +273,7 @@ def match_to_reference(corners, reference, max_dist: float, return_name: bool = 
     corners = np.asarray(corners, np.float64)
     reference = np.asarray(reference, np.float64)
     best = None
-    for name, g in grid_symmetries(corners):
+    for name, g in relabelled_boards(corners):
         if g.shape != reference.shape:
             continue
         d = np.linalg.norm(g - reference, axis=-1)

@@ -27,7 +27,7 @@ matrix. Contrast, offset and blur are taken as known (the position block of
 a larger Fisher matrix is only slightly worse for a point-symmetric corner,
 whose position decouples from them); refinement.md section 7.
 
-g_i must be the pixel-integrated gradient of the blurred pattern (synth.render
+g_i must be the pixel-integrated gradient of the blurred pattern (synth.imaging
 computes it from the exact edge measure of the pattern), not a finite
 difference of a hard-edged render.
 

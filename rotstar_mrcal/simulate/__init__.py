@@ -32,7 +32,7 @@ from .dataset import Settings, Truth, load_truth, pose_names, render_pose, true_
 from .exposure import expose, full_scale_code
 from .optics import GaussianPSF, KernelPSF, TiledPSF, as_psf, gaussian_kernel
 from .poses import default_distance_range, look_at_pose, pose_ok, random_poses, tilt_angle
-from .render import render_irradiance
+from .irradiance import render_irradiance
 from .screen import Screen, exact_frames, make_screen, png_frames
 
 __all__ = [

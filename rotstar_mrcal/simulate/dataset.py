@@ -58,7 +58,7 @@ from ..pattern.layout import Layout
 from .camera import RayGrid, camera_rays, remember_rays
 from .exposure import expose
 from .optics import describe_psf
-from .render import render_irradiance
+from .irradiance import render_irradiance
 from .screen import Screen, exact_frames, make_screen
 
 TRUTH_FORMAT = "rotstar-truth/1"
@@ -70,7 +70,7 @@ class Settings:
 
     supersample: int = 4  # s x s sub-pixels per camera pixel
     blur_px: float = 1.0  # Gaussian PSF sigma, camera pixels (0: none); see write_dataset(psf=)
-    sampling: str = "area"  # "area" or "point"; see render.py
+    sampling: str = "area"  # "area" or "point"; see irradiance.py
     room: float = 0.02  # luminance seen off the screen
     gain: float = 0.9  # full-scale fraction per unit irradiance (white screen head-on)
     black: float = 0.0  # black level, fraction of full scale

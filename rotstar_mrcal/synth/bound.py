@@ -23,7 +23,7 @@ import numpy as np
 
 from ..optics.crlb import crlb_cov, fisher_information
 from .patterns import PATTERNS, pattern_frames
-from .render import ViewRenderer
+from .imaging import ViewRenderer
 
 
 def pattern_bounds(kernel, s: int, window: int = 10, contrast: float = 200.0, sigma_n: float = 2.0,

@@ -13,7 +13,7 @@ SYNOPSIS
 
 For one aberration and one tilt phi the board is shown at the 12 alpha
 directions (views.py). For each view and pattern (patterns.py) the
-noise-free frames are rendered once (render.py) through the aberration's
+noise-free frames are rendered once (imaging.py) through the aberration's
 PSF, together with the gradients that give the Fisher information. Then,
 for each noise level and each of `repeats` repetitions, every frame is
 exposed with independent Gaussian noise and every refiner (refiners.py)
@@ -58,7 +58,7 @@ from ..optics.psf import Optics, gaussian_psf, wavefront_psf
 from ..optics.wavefront import Seidel
 from .patterns import PATTERNS, pattern_frames
 from .refiners import REFINERS, refine
-from .render import ViewRenderer
+from .imaging import ViewRenderer
 from .views import ALPHAS_DEG, PHIS_DEG, view_jacobian
 
 ABERRATIONS = {

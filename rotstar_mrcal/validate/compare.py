@@ -47,7 +47,7 @@ class TestSet:
 
 
 @dataclasses.dataclass
-class Truth:
+class TrueCamera:
     """The true camera and the true pose of each named pose (simulated data)"""
 
     model: mrcal.cameramodel
@@ -74,7 +74,7 @@ def _heldout_summary(h: HeldOut, names) -> dict:
 
 
 def evaluate(method: str, model_a: mrcal.cameramodel, model_b: mrcal.cameramodel, test_a: TestSet,
-             test_b: TestSet, truth_a: Truth | None = None, truth_b: Truth | None = None,
+             test_b: TestSet, truth_a: TrueCamera | None = None, truth_b: TrueCamera | None = None,
              gridn_width: int = 40, distance: float | None = None) -> Evaluation:
     """All validation numbers of the calibrations A and B of one corner set"""
     held = {}

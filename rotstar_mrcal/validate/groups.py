@@ -92,7 +92,7 @@ def _evaluate(method, path_a, path_b, test_a, test_b, seq_a, seq_b, gridn, dista
     def truth(seq):
         if seq and os.path.exists(os.path.join(seq, "truth.json")):
             t = load_truth(seq)
-            return compare.Truth(t.model, t.rt_cam_board)
+            return compare.TrueCamera(t.model, t.rt_cam_board)
         return None
 
     return compare.evaluate(method, mrcal.cameramodel(path_a), mrcal.cameramodel(path_b), test_a, test_b,

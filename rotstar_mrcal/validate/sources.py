@@ -5,7 +5,7 @@ SYNOPSIS
     from rotstar_mrcal.validate.sources import load_corner_set
     cs = load_corner_set("seq/corners.vnl")
     cs.layout.nx, cs.corners.shape, cs.imagersize    # 14, (N, 9, 14, 2), (1280, 800)
-    cs.seq, cs.truth                                 # 'seq', compare.Truth or None
+    cs.seq, cs.truth                                 # 'seq', compare.TrueCamera or None
 
 How the pieces are found, in order:
 
@@ -34,7 +34,7 @@ from .. import dataset
 from ..pattern.layout import Layout
 from ..vnl import read_corners
 from .calibrate import vnl_has_weights
-from .compare import TestSet, Truth
+from .compare import TestSet, TrueCamera
 
 
 class SourceError(ValueError):
@@ -50,7 +50,7 @@ class CornerSet:
     imagersize: tuple[int, int]
     weights: bool  # the vnl has a weight column
     seq: str | None
-    truth: Truth | None
+    truth: TrueCamera | None
 
     @property
     def names(self) -> list[str]:
@@ -144,7 +144,7 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
         from ..simulate import load_truth
 
         tr = load_truth(seq)
-        t = Truth(tr.model, tr.rt_cam_board)
+        t = TrueCamera(tr.model, tr.rt_cam_board)
     return CornerSet(vnl, layout, files, corners, size, vnl_has_weights(vnl), seq, t)
 
 

@@ -42,7 +42,7 @@ import os
 import mrcal
 import numpy as np
 
-from ..detect.baselines import grid_symmetries
+from ..detect.baselines import relabelled_boards
 from .uncertainty import imager_grid
 
 
@@ -105,7 +105,7 @@ def _align(model: mrcal.cameramodel, rt_true: np.ndarray) -> np.ndarray | None:
         if not np.all(np.isfinite(rt_true[k])):
             continue
         true = mrcal.transform_point_rt(rt_true[k], flat)
-        best = min((g for _, g in grid_symmetries(true) if g.shape == solved[k].shape),
+        best = min((g for _, g in relabelled_boards(true) if g.shape == solved[k].shape),
                    key=lambda g: np.mean(np.linalg.norm(g - solved[k], axis=-1)))
         p0.append(best.reshape(-1, 3))
         p1.append(solved[k].reshape(-1, 3))

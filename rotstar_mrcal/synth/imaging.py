@@ -4,7 +4,7 @@ SYNOPSIS
 
     >>> import numpy as np
     >>> from rotstar_mrcal.synth.patterns import Star
-    >>> from rotstar_mrcal.synth.render import render_view
+    >>> from rotstar_mrcal.synth.imaging import render_view
     >>> from rotstar_mrcal.optics import gaussian_psf
     >>> apex = np.array((10.0, 10.0))                      # the corner, tile pixels
     >>> img, grad = render_view([Star.regular(4, 0.3)], gaussian_psf(1.0, 4), 4, 21, apex)
@@ -24,7 +24,7 @@ PSF at that resolution, summed block-wise into camera pixels.
    unit-sum array at sub-pixel resolution: optics.wavefront_psf,
    optics.gaussian_psf; simulate.optics.convolve, a true convolution).
 3. Block summation: each s x s block is averaged into one camera pixel
-   (simulate.render.block_average); a region of the kernel's radius around
+   (simulate.irradiance.block_average); a region of the kernel's radius around
    the tile is rendered and dropped so the tile has no border effects.
 
 Pixel (c, r) of a T x T tile covers [c - 1/2, c + 1/2] x [r - 1/2, r + 1/2]
@@ -49,7 +49,7 @@ import numpy as np
 
 import scipy.fft
 
-from ..simulate.render import block_average
+from ..simulate.irradiance import block_average
 from .patterns import Star
 
 

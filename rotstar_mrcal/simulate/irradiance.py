@@ -6,7 +6,7 @@ SYNOPSIS
     >>> from rotstar_mrcal.pattern.layout import make_layout
     >>> from rotstar_mrcal.simulate.camera import preset_model
     >>> from rotstar_mrcal.simulate.screen import exact_frames, make_screen
-    >>> from rotstar_mrcal.simulate.render import render_irradiance
+    >>> from rotstar_mrcal.simulate.irradiance import render_irradiance
     >>> layout = make_layout(screen=(800, 600), pitch=100, band=24)
     >>> screen = make_screen(exact_frames(layout), layout, room=0.02)
     >>> model = preset_model("pinhole-small")                 # 640x400, f = 320
