@@ -11,7 +11,7 @@ import sys
 from .. import dataset
 from ..validate import calibrate as cal
 from ..validate.sources import SourceError, load_corner_set
-from .common import run, say
+from .common import make_folder, run, say
 
 DESCRIPTION = f"""\
 Calibrate a camera from a rotating-star dataset with mrcal: detect the
@@ -77,17 +77,6 @@ def parse_args(argv=None):
     return p.parse_args(argv)
 
 
-def _make_outdir(path: str) -> str | None:
-    """Create the output folder; a one-line reason when it cannot be"""
-    try:
-        os.makedirs(path, exist_ok=True)
-    except (FileExistsError, NotADirectoryError):
-        return f"--outdir {path}: a file is in the way (not a folder)"
-    except OSError as e:
-        return f"--outdir {path}: {e.strerror}"
-    return None
-
-
 def _detect(a) -> tuple[str | None, int]:
     """Run rotstar-detect (the program, as printed) into OUTDIR/corners.vnl"""
     vnl = os.path.join(a.outdir, "corners.vnl")
@@ -114,10 +103,7 @@ def _main(argv=None) -> int:
     if a.corners and not os.path.exists(a.corners):
         say(f"rotstar-calibrate: {a.corners}: no such file")
         return 2
-    err = _make_outdir(a.outdir)
-    if err:
-        say(f"rotstar-calibrate: {err}")
-        return 2
+    make_folder(a.outdir)
     for stale in ("camera-0.cameramodel", "calibration.json"):  # a failed run leaves no old result behind
         if os.path.exists(os.path.join(a.outdir, stale)):
             os.remove(os.path.join(a.outdir, stale))

@@ -129,6 +129,17 @@ def run(prog: str, main_fn, argv=None) -> int:
 
 
 # ---- output paths --------------------------------------------------------------------------
+def make_folder(path: str, what: str = "--outdir") -> str:
+    """Create an output folder and its parents; fail() with one line naming it when it cannot be"""
+    try:
+        os.makedirs(path, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        fail(f"{what} {path}: a file is in the way (not a folder)")
+    except OSError as e:
+        fail(f"{what} {path}: {e.strerror}")
+    return path
+
+
 def _inside(path: str, folder: str) -> bool:
     path, folder = os.path.realpath(path), os.path.realpath(folder)
     return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)

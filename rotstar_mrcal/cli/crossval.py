@@ -17,7 +17,7 @@ from ..validate.cornersets import dataset_methods
 from ..validate.detection import detect_dataset as _detect_dataset
 from ..validate.detection import split_interleaved
 from ..validate.sources import SourceError, load_corner_set, load_model
-from .common import Progress, run, say
+from .common import Progress, make_folder, run, say
 
 DESCRIPTION = """\
 Validate calibrations the way the rotating-star paper and mrcal do it.
@@ -208,16 +208,6 @@ def mode_sets(a, sets: dict) -> int:
     return 0 if c.failed < c.sets else 1  # a set that cannot be calibrated is a result too
 
 
-def _outdir_error(path: str) -> str | None:
-    try:
-        os.makedirs(path, exist_ok=True)
-    except (FileExistsError, NotADirectoryError):
-        return f"--outdir {path}: a file is in the way (not a folder)"
-    except OSError as e:
-        return f"--outdir {path}: {e.strerror}"
-    return None
-
-
 def main(argv=None) -> int:
     return run("rotstar-crossval", _main, argv)
 
@@ -236,10 +226,7 @@ def _main(argv=None) -> int:
         if not a.outdir:
             say("rotstar-crossval: comparing two groups needs --outdir for the models and figures")
             return 2
-        err = _outdir_error(a.outdir)
-        if err:
-            say(f"rotstar-crossval: {err}")
-            return 2
+        make_folder(a.outdir)
         sets = {}
         if len(a.inputs) == 1:
             if a.methods:
