@@ -37,7 +37,7 @@ it otherwise (any symmetry of the grid is a valid labelling for one camera).
 The checkerboard frame should hold as many photons as the rotating-star
 sequence: the paper averages 8 captures (baselines.average_frames), and so
 does the demo. mrgingham, the fourth baseline, only finds square N x N boards
-and runs as its own program on images of one (mrgingham_corners).
+and runs as its own program on images of one (baselines.mrgingham_detect).
 """
 
 from __future__ import annotations
@@ -79,8 +79,3 @@ def detect_methods(frames, layout, full_scale: float, checkerboard=None, methods
             f = Found(f.corners if q is None else q, f.weights, f.why)
         out[m.name] = f
     return out
-
-
-def mrgingham_corners(paths, gridn: int, jobs: int = 1) -> dict:
-    """{path: (gridn, gridn, 2) or None} by the mrgingham program (baselines.mrgingham_detect)"""
-    return baselines.mrgingham_detect(list(paths), gridn, jobs=jobs)
