@@ -143,6 +143,7 @@ class Found:
     corners: np.ndarray | None  # (ny, nx, 2) or None: no board
     weights: np.ndarray | None = None  # (ny, nx) or None
     why: str = ""  # why there is no board
+    shifts: object = None  # rotstar's detect.display.FrameShifts of the pose (the dataset's motion check)
 
 
 def rotstar_detection(p: PoseImages):
@@ -157,12 +158,12 @@ def rotstar_detection(p: PoseImages):
 
 def _rotstar(p: PoseImages) -> Found:
     r = rotstar_detection(p)
-    return Found(r.corners if r.found else None, None, r.error)
+    return Found(r.corners if r.found else None, None, r.error, r.shifts)
 
 
 def _rotstar_weighted(p: PoseImages) -> Found:
     r = rotstar_detection(p)
-    return Found(r.corners if r.found else None, r.weights() if r.found else None, r.error)
+    return Found(r.corners if r.found else None, r.weights() if r.found else None, r.error, r.shifts)
 
 
 def _finder(how: str, what: str):

@@ -201,3 +201,20 @@ def test_simulated_display_offsets_cli(tmp_path, run_cli):
         assert len(json.load(f)["settings"]["display_offsets"]) == 8
     r = run_cli("rotstar-simulate", "--out", tmp_path / "t", "--display-offsets", "1,2,3")
     assert r.returncode != 0 and "Traceback" not in r.stderr and "--display-offsets" in r.stderr
+
+
+def test_crossval_detection_drops_the_moved_pose(offset_seq, tmp_path):
+    """rotstar-crossval's detection of several methods applies the same dataset check"""
+    from rotstar_mrcal.validate.detection import detect_dataset as detect_methods_dataset
+    from rotstar_mrcal.vnl import read_corners
+
+    lines = []
+    vnls = detect_methods_dataset(offset_seq[0], ["rotstar", "saddle"], str(tmp_path), "A", jobs=2, log=lines.append)
+    moved = f"pose{N_SHOWN:03d}"
+    assert len(lines) == 1 and lines[0].startswith(f"{moved}: skipped") and "camera moved" in lines[0]
+    layout = dataset.read_pattern(offset_seq[0])[1]
+    for m, vnl in vnls.items():
+        with open(vnl) as f:
+            boards = read_corners(f, layout.nx, layout.ny)
+        kept = {os.path.basename(os.path.dirname(k)) for k, v in boards.items() if v is not None}
+        assert kept == {f"pose{i:03d}" for i in range(N_SHOWN)}, (m, sorted(kept))

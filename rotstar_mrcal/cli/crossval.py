@@ -119,7 +119,8 @@ def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1) -> 
     n = len(dataset.list_poses(seq))
     say(f"rotstar-crossval: detecting {', '.join(methods)} on {seq} ({n} poses)")
     progress = Progress(n)
-    return _detect_dataset(seq, methods, outdir, side, jobs, progress=progress.step)
+    return _detect_dataset(seq, methods, outdir, side, jobs, progress=progress.step,
+                           log=lambda line: say(f"rotstar-crossval: {line}"))
 
 
 # ---------------------------------------------------------------------------

@@ -21,13 +21,17 @@ Images without a board go to neither.
 from __future__ import annotations
 
 import collections
-import concurrent.futures as cf
 import os
 
 from .. import dataset
+from ..detect.display import dataset_offsets
+from ..methods import Found
+from ..parallel import process_map
 from ..vnl import write_corners
 from .cornersets import detect_methods
 from .sources import SourceError, read_vnl_names
+
+MAX_MOTION = 0.15  # px, as rotstar-detect's --max-motion
 
 
 def _detect_pose(seq, pose, layout, methods):
@@ -37,10 +41,24 @@ def _detect_pose(seq, pose, layout, methods):
     return pose, p.first_file, cbfile, found
 
 
-def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1, progress=None) -> dict[str, str]:
+def moved_poses(res: dict, max_motion: float = MAX_MOTION) -> list[str]:
+    """Poses whose rotating-star frames moved against the dataset's display offsets (detect.display)"""
+    shifts = {}
+    for p, (_, _, _, found) in res.items():
+        f = found.get("rotstar") or found.get("rotstar-weighted")
+        if f is not None and f.corners is not None and f.shifts is not None:
+            shifts[p] = f.shifts
+    check = dataset_offsets(shifts)
+    return [p for p, m in check.motion_px.items() if m > max_motion and check.offsets is not None]
+
+
+def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1, progress=None,
+                   log=None) -> dict[str, str]:
     """Detect every method on a dataset; write outdir/<method>/<side>.vnl; {method: vnl}
 
-    progress(pose, message) is called as each pose is done.
+    progress(pose, message) is called as each pose is done; log(line) for a
+    pose dropped afterwards because its camera moved (moved_poses: every
+    method loses it, so that all compare the same poses).
     """
     _, layout = dataset.read_pattern(seq)
     poses = dataset.list_poses(seq)
@@ -53,13 +71,13 @@ def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1, pro
         if progress:
             progress(r[0], ", ".join(f"{m} {'ok' if v.corners is not None else 'none'}" for m, v in r[3].items()))
 
-    if jobs > 1:
-        with cf.ProcessPoolExecutor(jobs) as ex:
-            for f in cf.as_completed([ex.submit(_detect_pose, seq, p, layout, methods) for p in poses]):
-                done(f.result())
-    else:
-        for p in poses:
-            done(_detect_pose(seq, p, layout, methods))
+    for r in process_map(_detect_pose, [(seq, p, layout, methods) for p in poses], jobs):
+        done(r)
+    for p in moved_poses(res):
+        res[p] = (*res[p][:3], {m: Found(None, None, "camera moved during the sequence") for m in res[p][3]})
+        if log:
+            log(f"{p}: skipped: frames do not align: the camera moved during the sequence (beyond the "
+                "display's offsets over the dataset)")
     out = {}
     for m in methods:
         boards, weights = [], []
