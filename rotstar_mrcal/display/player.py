@@ -105,6 +105,8 @@ def write_player(folder: str, hold: int = DEFAULT_HOLD, marker_hold: int | None 
         with open(os.path.join(folder, fr["file"]), "rb") as f:
             pngs[fr["file"]] = f.read()
     fn = os.path.join(folder, name)
-    with open(fn, "w", encoding="utf-8") as f:
-        f.write(render_player(player_config(pattern, pngs, hold, marker_hold)))
+    page = render_player(player_config(pattern, pngs, hold, marker_hold))
+    with open(fn + ".tmp", "w", encoding="utf-8") as f:  # renamed when complete
+        f.write(page)
+    os.replace(fn + ".tmp", fn)
     return fn
