@@ -166,6 +166,23 @@ def per_frame_corners(frames: np.ndarray, corners: np.ndarray, window: np.ndarra
 SHIFT_MIN_PX = 0.02  # display offsets below this (camera px) are not modelled in the refinement
 
 
+def refine_with_display_offsets(frames, res, rough, labels, w, pitch) -> tuple:
+    """(Refined, FrameShifts): each frame's displacement measured (display.py), then refined with it modelled
+
+    res: the joint refinement of the corners (labels (N, 2), rough starts
+    (N, 2), windows w (N,)); pitch: display pixels per grid step. The second
+    refinement runs only when the offsets move a corner by SHIFT_MIN_PX or more.
+    """
+    idx, per = per_frame_corners(frames, res.corners, w, res.ok)
+    H = grid_homography(res.corners[res.ok], labels[res.ok], pitch)
+    jac = homography_jacobian(H, labels * float(pitch))
+    shifts = frame_shifts(per, res.corners[idx], labels[idx], pitch, jac[idx])
+    img = shifts.image_shifts(jac)
+    if np.abs(img).max() > SHIFT_MIN_PX:
+        res = symmetric_refine(frames, np.where(res.ok[:, None], res.corners, rough), w, shifts=img)
+    return res, shifts
+
+
 def detect_pose(
     frames: np.ndarray,
     layout: Layout,
@@ -238,16 +255,8 @@ def detect_pose(
     if refine == "symmetric":
         res = symmetric_refine(frames, rough, w)
         if check_motion and res.ok.sum() >= 4:
-            # display offsets: measure each frame's displacement, then refine with it modelled
-            idx, per = per_frame_corners(frames, res.corners, w, res.ok)
-            ok4 = res.ok
-            H = grid_homography(res.corners[ok4], labels[ok4], layout.pitch)
-            jac = homography_jacobian(H, labels * float(layout.pitch))
-            shifts = frame_shifts(per, res.corners[idx], labels[idx], layout.pitch, jac[idx])
+            res, shifts = refine_with_display_offsets(frames, res, rough, labels, w, layout.pitch)
             motion = shifts.residual_px
-            img = shifts.image_shifts(jac)
-            if np.abs(img).max() > SHIFT_MIN_PX:
-                res = symmetric_refine(frames, np.where(res.ok[:, None], res.corners, rough), w, shifts=img)
             if motion > max_motion:
                 return _fail(layout, f"frames do not align: the camera moved during the sequence "
                                      f"(the frames turn or scale against each other by {motion:.2f} px, "
