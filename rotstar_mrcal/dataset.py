@@ -39,6 +39,7 @@ import stat
 import cv2
 import numpy as np
 
+from .atomic import atomic_path
 from .pattern.layout import Layout, layout_from_dict
 
 
@@ -233,8 +234,8 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
 def write_pose(seq: str, pose: str, images: dict[str, np.ndarray]) -> str:
     """Write one pose folder: {file name: uint8 or uint16 image}, each file atomically
 
-    Each image goes to a hidden temporary file in the folder, renamed when
-    complete: an interrupted run leaves no half-written frame.
+    Each image is written through atomic.atomic_path: an interrupted run
+    leaves no half-written frame.
     """
     folder = os.path.join(seq, pose)
     os.makedirs(folder, exist_ok=True)
@@ -242,12 +243,7 @@ def write_pose(seq: str, pose: str, images: dict[str, np.ndarray]) -> str:
         if img.dtype not in (np.uint8, np.uint16):
             raise ValueError(f"{name}: write uint8 or uint16 images, not {img.dtype}")
         fn = os.path.join(folder, name)
-        tmp = os.path.join(folder, f".{name}.tmp{os.path.splitext(name)[1]}")
-        try:
+        with atomic_path(fn) as tmp:
             if not cv2.imwrite(tmp, img):
                 raise OSError(f"cannot write {fn}")
-            os.replace(tmp, fn)
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
     return folder

@@ -27,6 +27,7 @@ import os
 import cv2
 import numpy as np
 
+from ..atomic import atomic_path
 from ..detect.display import DisplayCheck, dataset_offsets
 from . import coverage
 from .motion import difference_signal, downsample, is_still
@@ -178,10 +179,8 @@ def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frame
     ds.boards.append(r.corners)
     ds.imagersize = (frames.shape[2], frames.shape[1])
     counts = coverage.coverage_counts(ds.boards, ds.imagersize)
-    png = os.path.join(ds.folder, "coverage.png")
-    tmp = os.path.join(ds.folder, ".coverage.png.tmp.png")
-    cv2.imwrite(tmp, coverage.coverage_image(ds.boards, ds.imagersize))
-    os.replace(tmp, png)
+    with atomic_path(os.path.join(ds.folder, "coverage.png")) as tmp:
+        cv2.imwrite(tmp, coverage.coverage_image(ds.boards, ds.imagersize))
     if r.shifts is not None:
         ds.shifts[pose] = r.shifts
     display = ds.display

@@ -11,7 +11,7 @@ import sys
 from .. import dataset
 from ..validate import calibrate as cal
 from ..validate.sources import SourceError, load_corner_set
-from .common import make_folder, run, say
+from .common import atomic_write, make_folder, run, say
 
 DESCRIPTION = f"""\
 Calibrate a camera from a rotating-star dataset with mrcal: detect the
@@ -132,11 +132,9 @@ def _main(argv=None) -> int:
         return 1
     for line in c.summary_lines():
         say(f"rotstar-calibrate: {line}")
-    tmp = os.path.join(a.outdir, "calibration.json.tmp")
-    with open(tmp, "w") as f:
+    with atomic_write(os.path.join(a.outdir, "calibration.json")) as f:
         json.dump(c.to_json(), f, indent=1)
         f.write("\n")
-    os.replace(tmp, os.path.join(a.outdir, "calibration.json"))
     if c.failures:
         say(f"rotstar-calibrate: {'kept despite: ' if c.kept else 'FAILED: '}" + "; ".join(c.failures)
             + ("" if c.kept else " (no model written; --keep writes it anyway)"))

@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import math
 import os
-import secrets
 import signal
 import sys
 import threading
 import time
 from typing import NoReturn
+
+from ..atomic import atomic_path, atomic_write  # noqa: F401  (re-exported: the commands write through these)
 
 
 def say(msg: str) -> None:
@@ -184,25 +184,3 @@ def check_output_path(path: str, inputs=(), folder: bool = False) -> str:
     return path
 
 
-@contextlib.contextmanager
-def atomic_path(path: str):
-    """Yield a temporary path in path's folder (same extension, for writers that go by it);
-    renamed to path when the block ends, removed if it raises or is interrupted"""
-    d, base = os.path.split(path)
-    stem, ext = os.path.splitext(base)
-    tmp = os.path.join(d, f".{stem}.{os.getpid()}-{secrets.token_hex(3)}.part{ext}")
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.remove(tmp)
-        raise
-
-
-@contextlib.contextmanager
-def atomic_write(path: str, mode: str = "w", **kw):
-    """open(path, mode) that writes a temporary file in the same folder, renamed on success"""
-    with atomic_path(path) as tmp:
-        with open(tmp, mode, **kw) as f:
-            yield f

@@ -17,7 +17,7 @@ from ..validate.cornersets import dataset_methods
 from ..validate.detection import detect_dataset as _detect_dataset
 from ..validate.detection import split_interleaved
 from ..validate.sources import SourceError, load_corner_set, load_model
-from .common import Progress, make_folder, run, say
+from .common import Progress, atomic_write, make_folder, run, say
 
 DESCRIPTION = """\
 Validate calibrations the way the rotating-star paper and mrcal do it.
@@ -109,9 +109,8 @@ def _write_json(obj, path=None):
     if path is None:
         sys.stdout.write(text)
     else:
-        with open(path + ".tmp", "w") as f:
+        with atomic_write(path) as f:
             f.write(text)
-        os.replace(path + ".tmp", path)
 
 
 def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1) -> dict[str, str]:

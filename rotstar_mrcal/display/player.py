@@ -46,6 +46,7 @@ import importlib.resources
 import json
 import os
 
+from ..atomic import atomic_write
 from ..pattern.layout import layout_from_dict
 from .loop import player_loop
 
@@ -105,8 +106,6 @@ def write_player(folder: str, hold: int = DEFAULT_HOLD, marker_hold: int | None 
         with open(os.path.join(folder, fr["file"]), "rb") as f:
             pngs[fr["file"]] = f.read()
     fn = os.path.join(folder, name)
-    page = render_player(player_config(pattern, pngs, hold, marker_hold))
-    with open(fn + ".tmp", "w", encoding="utf-8") as f:  # renamed when complete
-        f.write(page)
-    os.replace(fn + ".tmp", fn)
+    with atomic_write(fn, encoding="utf-8") as f:
+        f.write(render_player(player_config(pattern, pngs, hold, marker_hold)))
     return fn

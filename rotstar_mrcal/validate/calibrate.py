@@ -82,6 +82,8 @@ import tempfile
 import mrcal
 import numpy as np
 
+from ..atomic import atomic_path
+
 LEAN_LENSMODEL = "LENSMODEL_OPENCV8"
 """The lean model: rotstar-detect's printed command, rotstar-crossval, the first fit of rotstar-calibrate"""
 
@@ -631,9 +633,8 @@ class Calibration:
 
 
 def _atomic_copy(src: str, dst: str) -> None:
-    tmp = dst + ".tmp"
-    shutil.copyfile(src, tmp)
-    os.replace(tmp, dst)
+    with atomic_path(dst) as tmp:
+        shutil.copyfile(src, tmp)
 
 
 def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, knots_x: int = DEFAULT_KNOTS_X,
@@ -652,7 +653,7 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
 
     log = log or (lambda s: None)
     final = os.path.join(outdir, "camera-0.cameramodel")
-    for stale in [final, final + ".tmp"] + [os.path.join(outdir, "candidates", n, "camera-0.cameramodel")
+    for stale in [final] + [os.path.join(outdir, "candidates", n, "camera-0.cameramodel")
                                             for n in ("lean", "splined", "model")]:
         if os.path.exists(stale):
             os.remove(stale)

@@ -24,6 +24,7 @@ import collections
 import os
 
 from .. import dataset
+from ..atomic import atomic_write
 from ..detect.display import dataset_offsets
 from ..methods import Found
 from ..parallel import process_map
@@ -87,9 +88,8 @@ def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1, pro
             weights.append(found[m].weights)
         path = os.path.join(outdir, m, f"{side}.vnl")
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        with open(path + ".tmp", "w") as f:
+        with atomic_write(path) as f:
             write_corners(f, boards, weights if m == "rotstar-weighted" else None)
-        os.replace(path + ".tmp", path)
         out[m] = path
     return out
 
@@ -117,9 +117,8 @@ def split_interleaved(vnl: str, path_a: str, path_b: str) -> tuple[int, int]:
     header = [line for line in lines if line.startswith("#")]
     for side, path in enumerate((path_a, path_b)):
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-        with open(path + ".tmp", "w") as f:
+        with atomic_write(path) as f:
             f.writelines(header)
             f.writelines(line for line in lines if not line.startswith("#") and line.split()
                          and rank.get(line.split()[0]) == side)
-        os.replace(path + ".tmp", path)
     return sum(1 for r in rank.values() if r == 0), sum(1 for r in rank.values() if r == 1)

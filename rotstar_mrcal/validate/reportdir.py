@@ -27,6 +27,7 @@ import os
 import re
 import shutil
 
+from ..atomic import atomic_write
 from . import plots
 from .groups import Comparison
 from .report import headline, html, markdown, methods_of, verdicts
@@ -140,9 +141,8 @@ def build_report(results, dirs, out: str, title: str, notes: str = "", extra_fig
     files = {"index.md": md, "index.html": page, "headline.md": head_md,
              "results.json": json.dumps({"format": "rotstar-report/1", "conditions": results}, indent=1) + "\n"}
     for name, text in files.items():  # each file whole or not at all
-        with open(os.path.join(out, name + ".tmp"), "w") as f:
+        with atomic_write(os.path.join(out, name)) as f:
             f.write(text)
-        os.replace(os.path.join(out, name + ".tmp"), os.path.join(out, name))
     return {k: os.path.join(out, k) for k in files}
 
 
