@@ -7,6 +7,7 @@ import os
 import sys
 
 from .. import dataset
+from ..detect.display import MAX_MOTION
 from ..detect.pipeline import MIN_WINDOW
 from ..methods import REFINERS
 from ..detect.run import detect_dataset
@@ -53,7 +54,7 @@ def parse_args(argv=None):
     p.add_argument("--weights", action="store_true",
                    help="write a weight column (1/sigma of each corner, normalised to median 1) "
                         "for mrcal's --corners-cache-has-weights")
-    p.add_argument("--max-motion", type=number_arg(float, 0, lo_open=True), default=0.15,
+    p.add_argument("--max-motion", type=number_arg(float, 0, lo_open=True), default=MAX_MOTION,
                    help="reject a pose whose frames disagree by more than this many pixels "
                         "(the camera moved during the sequence; default 0.15)")
     p.add_argument("--jobs", "-j", type=number_arg(int, 1), default=1, help="poses processed in parallel (default 1)")

@@ -23,7 +23,7 @@ pose moves the frames too, but differently in every pose.
 
 Per pose, each frame is refined alone for a subset of corners; the frame's
 displacement from the joint corner is carried to the screen through the
-local Jacobian of the homography from grid to image, and the per-frame mean
+local Jacobian of the homography from grid to image, and the per-frame median
 of those screen displacements is the frame's *display offset* (display
 pixels, zero mean over the frames: a shift common to all frames cannot be
 told from the board's position). What a shift on the screen does not explain
@@ -43,6 +43,7 @@ import cv2
 import numpy as np
 
 MIN_POSES = 3
+MAX_MOTION = 0.15  # px: frames that moved more against each other than this mean a moving camera
 
 
 @dataclasses.dataclass
@@ -114,6 +115,10 @@ class DisplayCheck:
     offsets: np.ndarray | None  # (nframes, 2) display px, median over poses; None with too few poses
     motion_px: dict  # pose -> largest frame-to-frame shift not explained by the display, camera px
     poses: int  # how many poses the offsets come from
+
+    def moved(self, max_motion: float = MAX_MOTION) -> list[str]:
+        """The poses whose frames moved against each other by more than max_motion px"""
+        return [p for p, m in self.motion_px.items() if m > max_motion]
 
     def summary(self) -> str:
         if self.offsets is None:

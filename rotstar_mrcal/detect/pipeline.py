@@ -44,7 +44,7 @@ import numpy as np
 from ..methods import refiner
 from ..pattern.layout import Layout
 from .boundaries import element_boundaries
-from .display import FrameShifts, frame_shifts, grid_homography, homography_jacobian
+from .display import MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian
 from .indexing import (GridError, contact_graph, frame_angles, grid_array, grid_labels, grid_labels_grown,
                        mirror_reason, order_reason, orient, prune_triangles)
 from .refine import refine_each_frame, symmetric_refine
@@ -190,7 +190,7 @@ def detect_pose(
     checkerboard: np.ndarray | None = None,
     window: float = 10.0,
     refine: str = "symmetric",
-    max_motion: float = 0.15,
+    max_motion: float = MAX_MOTION,
     check_motion: bool = True,
 ) -> PoseCorners:
     """Detect and label the corners of one pose; see the module doc"""

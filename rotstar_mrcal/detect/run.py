@@ -30,7 +30,7 @@ from .. import dataset
 from ..parallel import process_map
 from ..pattern.layout import Layout
 from ..vnl import mrcal_can_read
-from .display import DisplayCheck, dataset_offsets
+from .display import MAX_MOTION, DisplayCheck, dataset_offsets
 from .pipeline import PoseCorners, detect_pose
 
 
@@ -91,7 +91,7 @@ def detect_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, 
     return PoseResult(pose, p.first_file, r, r.error, (p.rotstar.shape[2], p.rotstar.shape[1]))
 
 
-def detect_dataset(seq: str, *, window: float = 10.0, refine: str = "symmetric", max_motion: float = 0.15,
+def detect_dataset(seq: str, *, window: float = 10.0, refine: str = "symmetric", max_motion: float = MAX_MOTION,
                    jobs: int = 1, poses: list[str] | None = None, progress=None) -> DatasetCorners:
     """Detect every pose of seq, then check the frames' motion over the dataset; see the module doc
 
@@ -114,14 +114,12 @@ def detect_dataset(seq: str, *, window: float = 10.0, refine: str = "symmetric",
     results = [done[p] for p in poses]
     shifts = {r.pose: r.corners.shifts for r in results if r.found and r.corners.shifts is not None}
     display = dataset_offsets(shifts)
-    rejected = []
     for r in results:
-        m = display.motion_px.get(r.pose)
-        if not r.found or m is None:
-            continue
-        r.corners.motion_px = m
-        if m > max_motion:
-            r.error = (f"frames do not align: the camera moved during the sequence (its frames moved "
-                       f"{m:.2f} px against each other beyond the screen's own offsets, limit {max_motion})")
-            rejected.append(r)
+        if r.pose in display.motion_px:
+            r.corners.motion_px = display.motion_px[r.pose]
+    rejected = [r for r in results if r.pose in display.moved(max_motion)]
+    for r in rejected:
+        r.error = (f"frames do not align: the camera moved during the sequence (its frames moved "
+                   f"{r.corners.motion_px:.2f} px against each other beyond the screen's own offsets, "
+                   f"limit {max_motion})")
     return DatasetCorners(seq, layout, pattern, results, display, rejected)

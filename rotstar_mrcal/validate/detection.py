@@ -25,14 +25,12 @@ import os
 
 from .. import dataset
 from ..atomic import atomic_write
-from ..detect.display import dataset_offsets
+from ..detect.display import MAX_MOTION, dataset_offsets
 from ..methods import Found
 from ..parallel import process_map
 from ..vnl import write_corners
 from .cornersets import detect_methods
 from .sources import SourceError, read_vnl_names
-
-MAX_MOTION = 0.15  # px, as rotstar-detect's --max-motion
 
 
 def _detect_pose(seq, pose, layout, methods):
@@ -49,8 +47,7 @@ def moved_poses(res: dict, max_motion: float = MAX_MOTION) -> list[str]:
         f = found.get("rotstar") or found.get("rotstar-weighted")
         if f is not None and f.corners is not None and f.shifts is not None:
             shifts[p] = f.shifts
-    check = dataset_offsets(shifts)
-    return [p for p, m in check.motion_px.items() if m > max_motion and check.offsets is not None]
+    return dataset_offsets(shifts).moved(max_motion)
 
 
 def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1, progress=None,
