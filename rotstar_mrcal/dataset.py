@@ -13,8 +13,8 @@ SYNOPSIS
     >>> dataset.list_poses(seq)
     ['pose000']
     >>> pose = dataset.load_pose(seq, "pose000", dataset.read_pattern(seq)[1])
-    >>> pose.rotstar.shape, pose.checkerboard.shape, pose.full_scale
-    ((8, 40, 60), (40, 60), 65535.0)
+    >>> pose.rotstar.shape, pose.identity.shape, pose.checkerboard.shape, pose.full_scale
+    ((8, 40, 60), (11, 40, 60), (40, 60), 65535.0)
 
 Layout on disk:
 
@@ -57,6 +57,7 @@ class Pose:
     checkerboard: np.ndarray | None  # (H, W) float32 or None
     full_scale: float  # 255 or 65535
     files: list[str]  # paths of the rotstar frames, in order
+    identity: np.ndarray | None = None  # (nidentity, H, W) float32, the identity frames, or None
 
     @property
     def first_file(self) -> str:
@@ -198,8 +199,9 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
     if extra:
         raise DatasetError(f"{os.path.join(folder, extra[0])}: extra frame not in pattern.json")
     rot_files = [os.path.join(folder, f["file"]) for f in frames if f["kind"] == "rotstar"]
+    id_files = [os.path.join(folder, f["file"]) for f in frames if f["kind"] == "identity"]
     imgs, scales = [], set()
-    for fn in rot_files:
+    for fn in rot_files + id_files:
         img, fs = read_image(fn)
         imgs.append(img)
         scales.add(fs)
@@ -208,7 +210,7 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         common = max(set(shapes), key=shapes.count)  # the size most frames have
         odd = next(k for k, s in enumerate(shapes) if s != common)
         raise DatasetError(
-            f"{rot_files[odd]}: frame size {shapes[odd][1]}x{shapes[odd][0]} differs from the others "
+            f"{(rot_files + id_files)[odd]}: frame size {shapes[odd][1]}x{shapes[odd][0]} differs from the others "
             f"({common[1]}x{common[0]})"
         )
     if len(scales) > 1:
@@ -221,13 +223,15 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
             checker, _ = read_image(fn)
             if checker.shape != imgs[0].shape:
                 raise DatasetError(f"{fn}: frame size differs from the rotating-star frames")
+    n = len(rot_files)
     return Pose(
         name=pose,
         folder=folder,
-        rotstar=np.stack(imgs),
+        rotstar=np.stack(imgs[:n]),
         checkerboard=checker,
         full_scale=scales.pop(),
         files=rot_files,
+        identity=np.stack(imgs[n:]) if id_files else None,
     )
 
 

@@ -128,6 +128,7 @@ class PoseImages:
     layout: Layout  # the board the method looks for (the square one for needs='square')
     full_scale: float  # the images' full-scale value (255, 65535, ...)
     frames: np.ndarray | None = None  # (nframes, H, W) rotating-star frames
+    identity: np.ndarray | None = None  # (nidentity, H, W) identity frames, when the pattern has them
     checkerboard: np.ndarray | None = None  # (H, W) the checkerboard frame (float: an average)
     png: str | None = None  # the board as an image file, for methods that are programs (mrgingham)
     start: np.ndarray | None = None  # (ny, nx, 2) start of start='rotstar' methods (default: rotstar's corners)
@@ -152,7 +153,7 @@ def rotstar_detection(p: PoseImages):
         from .detect.pipeline import detect_pose
 
         p.detection = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale,
-                                  window=p.window)
+                                  window=p.window, identity=p.identity)
     return p.detection
 
 

@@ -192,6 +192,7 @@ def detect_pose(
     refine: str = "symmetric",
     max_motion: float = MAX_MOTION,
     check_motion: bool = True,
+    identity: np.ndarray | None = None,
 ) -> PoseCorners:
     """Detect and label the corners of one pose; see the module doc"""
     frames = np.asarray(frames, np.float32)

@@ -87,7 +87,8 @@ def detect_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, 
         p = dataset.load_pose(seq, pose, pattern_frames)
     except dataset.DatasetError as e:
         return PoseResult(pose, fn, None, str(e))
-    r = detect_pose(p.rotstar, layout, full_scale=p.full_scale, checkerboard=p.checkerboard, **opts)
+    r = detect_pose(p.rotstar, layout, full_scale=p.full_scale, checkerboard=p.checkerboard,
+                    identity=p.identity, **opts)
     return PoseResult(pose, p.first_file, r, r.error, (p.rotstar.shape[2], p.rotstar.shape[1]))
 
 

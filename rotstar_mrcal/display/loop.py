@@ -61,6 +61,10 @@ def frame_level(layout: Layout, frame: dict) -> float:
         band = 1.0 if layout.band_white(int(frame["index"])) else 0.0
         total = layout.background * (W * H - board) + band * (board - elements) + 0.5 * elements
         return total / (W * H)
+    if kind == "identity":
+        x0, y0, x1, y1 = layout.board_extent()
+        white = int(layout.identity_code.frame_bits(int(frame["index"])).sum()) * (2 * layout.half_element) ** 2
+        return (layout.background * (W * H - (x1 - x0) * (y1 - y0)) + white) / (W * H)
     if kind == "checkerboard":
         na, nb = layout.nx + 1, layout.ny + 1
         black = sum(1 for a in range(na) for b in range(nb) if (a + b) % 2 == 0)

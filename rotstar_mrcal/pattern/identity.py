@@ -1,127 +1,175 @@
-"""Identity codes: each element's grid index written in bits, read back or rejected, never mislabelled
+"""Identity codes: each element's grid index written in time, read back or rejected, never mislabelled
 
 SYNOPSIS
 
     >>> import numpy as np
     >>> from rotstar_mrcal.pattern.identity import IdentityCode
-    >>> code = IdentityCode(nx=14, ny=9)
-    >>> code.nbits, code.min_distance            # 7 data bits, 4 Hamming checks, 1 overall parity
-    (12, 4)
-    >>> bits = code.encode(np.array([0, 5, 125]))  # element index j * nx + i
-    >>> bits.shape
-    (3, 12)
-    >>> code.decode(bits).tolist()
+    >>> code = IdentityCode.for_grid(nx=14, ny=9)
+    >>> code.nframes, code.weight, code.min_distance   # 13 identity frames, 6 of them white per element
+    (13, 6, 4)
+    >>> words = code.encode(np.array([0, 5, 125]))      # element index j * nx + i
+    >>> words.shape, words.sum(axis=1).tolist()
+    ((3, 13), [6, 6, 6])
+    >>> levels = 20 + 180 * words                       # what the camera sees: any exposure, any gamma
+    >>> code.decode(levels, noise=2.0)[0].tolist()
     [0, 5, 125]
-    >>> bad = bits.copy(); bad[1, 3] ^= 1; bad[2, [0, 7, 9]] ^= 1   # one and three bits misread
-    >>> code.decode(bad).tolist()                # rejected (-1), not corrected, not mislabelled
-    [0, -1, -1]
+    >>> levels[1, np.flatnonzero(words[1])[0]] = 20       # element 5 misread in one frame
+    >>> index, reason = code.decode(levels, noise=2.0)
+    >>> index.tolist(), reason[1]
+    ([0, -1, 125], 'identity unreadable: 5 white frames, the code has 6 (a frame dropped, repeated or misread)')
 
-The code is an extended Hamming code over the element index (d = 4): any
-one, two or three misread bits give a word that is not a codeword, and the
-element is rejected. Nothing is corrected: a calibration loses one element
-rather than gaining a wrong label. Words that are codewords of indices
-beyond the grid (nx * ny <= index < 2^k) are rejected too.
+The code is a constant-weight code (Graham and Sloane's construction): the
+words of n bits with exactly w ones whose positions sum to 0 modulo n. Two
+such words differ in at least 4 bits (d = 4). 13 frames name the 126
+elements of a 14x9 grid; every frame shows about half of the elements white.
 
-How a bit is read is the caller's business (issue 13's identity frames: a
-frame per bit and its complement, each bit decided by comparing the same
-pixels in the two frames, robust to exposure, vignetting and gamma); `decide`
-turns such pairs into bits and marks the ones too close to call, which
-`decode` then rejects with the element.
+Reading needs no threshold and no reference frame: in each element the w
+brightest of the n identity frames are the ones. This is a comparison of
+the same pixels across frames, so exposure, vignetting, display gamma and
+saturation cancel; the element is rejected unless the w-th and (w+1)-th
+brightest frames are separated by half the element's own contrast (a frame
+dropped, repeated or inverted changes the number of white frames in most
+elements, which this rejects) and the word read is one of the codewords
+(any one or two bits misread, with the weight kept, give a word outside the
+code). Nothing is corrected: a calibration loses an element rather than
+gaining a wrong label.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import itertools
 import math
 
 import numpy as np
 
+MIN_GAP_FRACTION = 0.5  # the w-th and (w+1)-th brightest frames must differ by this part of the contrast
+MIN_CONTRAST_NOISE = 6.0  # ... and the contrast must exceed this many times the noise of an element's mean
 
-def _check_bits(k: int) -> int:
-    """Hamming check bits r for k data bits: the smallest r with 2^r >= k + r + 1"""
-    r = 1
-    while 2**r < k + r + 1:
-        r += 1
-    return r
+
+@functools.lru_cache(maxsize=32)
+def _codewords(n: int, w: int) -> np.ndarray:
+    """All weight-w words of n bits whose one-positions sum to 0 mod n, in lexicographic order of positions"""
+    words = [c for c in itertools.combinations(range(n), w) if sum(c) % n == 0]
+    out = np.zeros((len(words), n), np.uint8)
+    for r, c in enumerate(words):
+        out[r, list(c)] = 1
+    return out
+
+
+@functools.lru_cache(maxsize=32)
+def _spread(n: int, w: int, count: int) -> np.ndarray:
+    all_words = _codewords(n, w)
+    return all_words[np.round(np.linspace(0, len(all_words) - 1, count)).astype(int)]
+
+
+def code_size(n: int, w: int) -> int:
+    """Number of codewords of length n and weight w (without building them for large n)"""
+    return len(_codewords(n, w)) if n <= 20 else math.comb(n, w) // n
 
 
 @dataclasses.dataclass(frozen=True)
 class IdentityCode:
-    """Extended Hamming code of the indices j * nx + i of an nx x ny grid"""
+    """A constant-weight code of the element indices j * nx + i of an nx x ny grid"""
 
     nx: int
     ny: int
+    nframes: int
+    weight: int
 
-    @property
-    def data_bits(self) -> int:
-        return max(1, math.ceil(math.log2(self.nx * self.ny)))
-
-    @property
-    def check_bits(self) -> int:
-        return _check_bits(self.data_bits)
-
-    @property
-    def nbits(self) -> int:
-        """Bits per element: data, Hamming checks, one overall parity"""
-        return self.data_bits + self.check_bits + 1
+    @classmethod
+    def for_grid(cls, nx: int, ny: int) -> "IdentityCode":
+        """The shortest code (fewest frames) with a word for every element"""
+        need = nx * ny
+        for n in range(4, 21):
+            for w in (n // 2, (n + 1) // 2):
+                if code_size(n, w) >= need:
+                    return cls(nx, ny, n, w)
+        raise ValueError(f"a {nx}x{ny} grid needs more than 20 identity frames")
 
     @property
     def min_distance(self) -> int:
         return 4
 
-    def _positions(self) -> tuple[np.ndarray, np.ndarray]:
-        """Hamming positions (1-based) of the data bits and of the check bits"""
-        n = self.data_bits + self.check_bits
-        pos = np.arange(1, n + 1)
-        check = (pos & (pos - 1)) == 0  # powers of two
-        return pos[~check], pos[check]
+    @property
+    def codewords(self) -> np.ndarray:
+        """(nx * ny, nframes) uint8: row e is the word of element e = j * nx + i
+
+        The elements take words evenly spread over the code's list (not its
+        first ones), so that every frame shows about half of them white.
+        """
+        return _spread(self.nframes, self.weight, self.nx * self.ny)
 
     def encode(self, index) -> np.ndarray:
-        """(..., nbits) uint8 codewords of element indices (...,); bit order: Hamming positions 1..n, then parity"""
+        """(..., nframes) uint8 codewords of element indices (...,)"""
         index = np.asarray(index, np.int64)
         if np.any((index < 0) | (index >= self.nx * self.ny)):
             raise ValueError(f"element index outside 0..{self.nx * self.ny - 1}")
-        dpos, cpos = self._positions()
-        n = self.data_bits + self.check_bits
-        word = np.zeros(index.shape + (n,), np.uint8)
-        data = (index[..., None] >> np.arange(self.data_bits)) & 1
-        word[..., dpos - 1] = data
-        for c in cpos:  # check bit c covers the positions whose binary expansion holds c
-            cover = (np.arange(1, n + 1) & c) != 0
-            word[..., c - 1] = np.bitwise_xor.reduce(word[..., cover], axis=-1)
-        parity = np.bitwise_xor.reduce(word, axis=-1)
-        return np.concatenate((word, parity[..., None]), axis=-1)
+        return self.codewords[index]
 
-    def decode(self, bits, reliable=None) -> np.ndarray:
-        """(...,) element indices of words (..., nbits), -1 where a word is not a valid codeword
+    def frame_bits(self, frame: int) -> np.ndarray:
+        """(ny, nx) uint8: which elements are white in identity frame `frame`"""
+        return self.codewords[:, frame].reshape(self.ny, self.nx)
 
-        reliable: optional (..., nbits) bool; a word with an unreliable bit is rejected.
+    def _table(self) -> dict:
+        return {w.tobytes(): e for e, w in enumerate(self.codewords)}
+
+    def decode(self, levels, noise: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """(index (...,), reason (...,)): the element indices read from levels (..., nframes), -1 and why where not
+
+        levels: each element's mean intensity in each identity frame, in any
+        units; noise: the standard deviation of one such mean (0: not checked).
         """
-        bits = np.asarray(bits, np.uint8)
-        if bits.shape[-1] != self.nbits:
-            raise ValueError(f"words of {self.nbits} bits expected, not {bits.shape[-1]}")
-        n = self.data_bits + self.check_bits
-        pos = np.arange(1, n + 1)
-        syndrome = np.bitwise_xor.reduce(np.where(bits[..., :n].astype(bool), pos, 0), axis=-1)
-        parity = np.bitwise_xor.reduce(bits, axis=-1)
-        dpos, _ = self._positions()
-        index = np.sum(bits[..., dpos - 1].astype(np.int64) << np.arange(self.data_bits), axis=-1)
-        ok = (syndrome == 0) & (parity == 0) & (index < self.nx * self.ny)
-        if reliable is not None:
-            ok &= np.all(np.asarray(reliable, bool), axis=-1)
-        return np.where(ok, index, -1)
+        v = np.asarray(levels, float)
+        if v.shape[-1] != self.nframes:
+            raise ValueError(f"levels of {self.nframes} identity frames expected, not {v.shape[-1]}")
+        shape = v.shape[:-1]
+        v = v.reshape(-1, self.nframes)
+        w = self.weight
+        s = -np.sort(-v, axis=1)  # descending
+        hi = np.median(s[:, :w], axis=1)
+        lo = np.median(s[:, w:], axis=1)
+        contrast = hi - lo
+        gap = s[:, w - 1] - s[:, w]
+        bits = (v >= s[:, w - 1 : w]).astype(np.uint8)
+        table = self._table()
+        index = np.array([table.get(b.tobytes(), -1) for b in bits], np.int64)
+        reason = np.full(len(v), "", dtype=object)
+        white = np.sum(v - lo[:, None] > 0.5 * contrast[:, None], axis=1)
+        readable = gap >= MIN_GAP_FRACTION * contrast
+        reason[index < 0] = "identity not a codeword (misread bits)"
+        bad_count = ~readable
+        reason[bad_count] = [f"identity unreadable: {n} white frames, the code has {w} "
+                             "(a frame dropped, repeated or misread)" for n in white[bad_count]]
+        dim = ~(contrast > max(MIN_CONTRAST_NOISE * noise, 0.0)) | ~np.isfinite(contrast)
+        reason[dim] = "identity unreadable: no contrast between the identity frames"
+        index[reason != ""] = -1
+        return index.reshape(shape), reason.reshape(shape)
+
+    def describe(self) -> dict:
+        """pattern.json's "identity" section: the code and every element's word"""
+        return {
+            "code": "constant weight: the words of n bits with w ones whose positions (0-based) sum to 0 mod n, "
+                    "in lexicographic order of those positions; element e = j*nx+i takes word round(e * (M - 1) / (nx*ny - 1)) "
+                    "of the M words (listed in codewords)",
+            "frames": self.nframes,
+            "weight": self.weight,
+            "min_distance": self.min_distance,
+            "reading": "in each element, the w brightest identity frames are the ones",
+            "codewords": ["".join(map(str, w)) for w in self.codewords],
+        }
 
 
-def decide(on: np.ndarray, off: np.ndarray, noise: float, k: float = 4.0) -> tuple[np.ndarray, np.ndarray]:
-    """(bits, reliable) from a bit's frame and its complement, measured over the same pixels
-
-        >>> bits, ok = decide(np.array([200., 90., 101.]), np.array([20., 180., 100.]), noise=2.0)
-        >>> bits.tolist(), ok.tolist()
-        ([1, 0, 1], [True, True, False])
-
-    A bit is 1 where the element is brighter in its frame than in the
-    complement; it is reliable when the difference exceeds k times the noise
-    of the difference (noise: of one measurement).
-    """
-    d = np.asarray(on, float) - np.asarray(off, float)
-    return (d > 0).astype(np.uint8), np.abs(d) > k * noise * math.sqrt(2)
+def code_from_dict(d: dict, nx: int, ny: int) -> IdentityCode:
+    """The code of pattern.json's "identity" section; ValueError when it is not ours"""
+    code = IdentityCode.for_grid(nx, ny)
+    if not isinstance(d, dict):
+        raise ValueError("identity is not an object")
+    if d.get("frames") != code.nframes or d.get("weight") != code.weight:
+        raise ValueError(f"identity: frames {d.get('frames')}, weight {d.get('weight')}; a {nx}x{ny} grid's "
+                         f"code has {code.nframes} frames of weight {code.weight}")
+    words = d.get("codewords")
+    if words is not None and words != code.describe()["codewords"]:
+        raise ValueError("identity.codewords differ from the code this version writes")
+    return code

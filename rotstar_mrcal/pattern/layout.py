@@ -54,6 +54,7 @@ class Layout:
     step: float = math.pi / 16
     marker: tuple[int, int] = (0, 0)
     background: float = 0.5
+    identity: bool = False  # identity frames after the rotating-star frames (pattern/identity.py)
 
     # ---- derived geometry -------------------------------------------------
     @property
@@ -114,8 +115,15 @@ class Layout:
         ]
 
     # ---- pattern.json -----------------------------------------------------
+    @property
+    def identity_code(self):
+        """The IdentityCode of this grid, or None without identity frames"""
+        from .identity import IdentityCode
+
+        return IdentityCode.for_grid(self.nx, self.ny) if self.identity else None
+
     def frames(self) -> list[dict]:
-        """The display sequence: nframes rotating-star frames, then the checkerboard"""
+        """The display sequence: nframes rotating-star frames, the identity frames, then the checkerboard"""
         out = [
             {
                 "file": f"rotstar_{k:02d}.png",
@@ -127,6 +135,15 @@ class Layout:
             }
             for k in range(self.nframes)
         ]
+        code = self.identity_code
+        for b in range(code.nframes if code else 0):
+            out.append({
+                "file": f"identity_{b:02d}.png",
+                "kind": "identity",
+                "index": b,
+                "encodes": f"bit {b} of every element's codeword (identity.codewords): the element's square "
+                           "white for 1, black for 0; border bands black",
+            })
         out.append({"file": "checkerboard.png", "kind": "checkerboard"})
         return out
 
@@ -162,6 +179,7 @@ class Layout:
                 "object_height_n": self.ny,
             },
             "frames": self.frames(),
+            **({"identity": self.identity_code.describe()} if self.identity else {}),
         }
 
     def to_json(self) -> str:
@@ -209,10 +227,12 @@ def make_layout(
     quiet: int = 50,
     nx: int | None = None,
     ny: int | None = None,
+    identity: bool = True,
 ) -> Layout:
     """Fit the largest grid of the given pitch on the screen
 
-    The baseline checkerboard has (nx+1) x (ny+1) squares of side pitch and
+    identity: show the identity frames (each element's index in time) after
+    the rotating-star frames. The baseline checkerboard has (nx+1) x (ny+1) squares of side pitch and
     needs a quiet zone of at least `quiet` display pixels on each side; nx and
     ny default to the most that fit. The grid is centred on the screen.
     """
@@ -242,6 +262,7 @@ def make_layout(
         nframes=nframes,
         step=step,
         marker=choose_marker(nx, ny),
+        identity=identity,
     )
 
 
@@ -274,6 +295,9 @@ def _get(d: dict, field: str, default=None, kind=int, lo=None, hi=None):
     return kind(v)
 
 
+FRAME_KINDS = ("rotstar", "identity", "checkerboard")
+
+
 def _check_frames(frames) -> int:
     """The "frames" list: file names and kinds; returns the number of rotating-star frames"""
     if not isinstance(frames, list):
@@ -288,13 +312,27 @@ def _check_frames(frames) -> int:
         if name in names:
             raise ValueError(f"frames[{k}].file {name!r} appears twice")
         names.add(name)
-        if f["kind"] not in ("rotstar", "checkerboard"):
-            raise ValueError(f"frames[{k}].kind {f['kind']!r}; must be rotstar or checkerboard")
+        if f["kind"] not in FRAME_KINDS:
+            raise ValueError(f"frames[{k}].kind {f['kind']!r}; must be one of {', '.join(FRAME_KINDS)}")
     n = sum(1 for f in frames if f["kind"] == "rotstar")
     if n < 2:
         raise ValueError(f"frames has {n} rotating-star frame(s); need at least 2 (the corners are where "
                          "the rotated frames agree)")
     return n
+
+
+def _check_identity(d: dict, nx: int, ny: int) -> bool:
+    """Whether pattern.json lists identity frames; ValueError when they do not match the grid's code"""
+    from .identity import code_from_dict
+
+    idx = [f.get("index") for f in d["frames"] if f["kind"] == "identity"]
+    if not idx and "identity" not in d:
+        return False
+    code = code_from_dict(d.get("identity"), nx, ny)
+    if idx != list(range(code.nframes)):
+        raise ValueError(f"frames: identity frames with indices {idx[:20]}; the {nx}x{ny} grid's code needs "
+                         f"0..{code.nframes - 1} in order")
+    return True
 
 
 def layout_from_dict(d: dict) -> Layout:
@@ -347,6 +385,7 @@ def layout_from_dict(d: dict) -> Layout:
         step=step,
         marker=(_get(m, "element.marker.i", lo=0, hi=nx - 1), _get(m, "element.marker.j", lo=0, hi=ny - 1)),
         background=_get(d, "element.background", 0.5, kind=float, lo=0.0, hi=1.0),
+        identity=_check_identity(d, nx, ny),
     )
     x0, y0, x1, y1 = layout.board_extent()
     if x0 < 0 or y0 < 0 or x1 > W or y1 > H:

@@ -103,6 +103,25 @@ def render_rotstar(layout: Layout, k: int) -> np.ndarray:
     return img
 
 
+def render_identity(layout: Layout, b: int) -> np.ndarray:
+    """Identity frame b: each element's square white where bit b of its codeword is 1, black where 0
+
+    The border bands are black and the screen outside them is the background,
+    as in the rotating-star frames; the squares are the checker squares of
+    those frames, so every element pixel changes between identity frames and
+    no band pixel does.
+    """
+    code = layout.identity_code
+    if code is None or not 0 <= b < code.nframes:
+        raise ValueError(f"identity frame {b}: the layout has {code.nframes if code else 0} identity frames")
+    img = np.full((layout.screen_height, layout.screen_width), layout.background)
+    x0, y0, x1, y1 = layout.board_extent()
+    img[y0:y1, x0:x1] = 0.0
+    u, v, _, _, _ = _element_pixels(layout)
+    img[v, u] = code.frame_bits(b).astype(float)[..., None, None]
+    return img
+
+
 def render_checkerboard(layout: Layout) -> np.ndarray:
     """The baseline checkerboard: (nx+1) x (ny+1) squares, inner corners = the grid
 
@@ -122,6 +141,8 @@ def render_frame(layout: Layout, frame: dict) -> np.ndarray:
     """Render one entry of layout.frames()"""
     if frame["kind"] == "rotstar":
         return render_rotstar(layout, int(frame["index"]))
+    if frame["kind"] == "identity":
+        return render_identity(layout, int(frame["index"]))
     if frame["kind"] == "checkerboard":
         return render_checkerboard(layout)
     raise ValueError(f"unknown frame kind {frame['kind']!r}")

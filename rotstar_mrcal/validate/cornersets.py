@@ -56,19 +56,19 @@ def dataset_methods() -> list[str]:
 
 
 def detect_methods(frames, layout, full_scale: float, checkerboard=None, methods=None,
-                   window: float = 10.0) -> dict[str, Found]:
+                   window: float = 10.0, identity=None) -> dict[str, Found]:
     """Every requested method's corners of one pose (rotstar_mrcal.methods); see the module doc
 
     frames: (nframes, H, W) rotating-star frames; checkerboard: (H, W) (the
     averaged captures) or None, in which case the checkerboard methods find
-    nothing. rotstar is detected once and starts the methods that start from it.
+    nothing; identity: (nidentity, H, W) identity frames or None. rotstar is detected once and starts the methods that start from it.
     """
     ms = [method(m) for m in (dataset_methods() if methods is None else methods)]
     bad = [m.name for m in ms if m.name not in dataset_methods()]
     if bad:
         raise ValueError(f"methods {bad} need other images; known here: {', '.join(dataset_methods())}")
     p = PoseImages(layout, full_scale, frames=np.asarray(frames, np.float32), checkerboard=checkerboard,
-                   window=window)
+                   window=window, identity=identity)
     r = rotstar_detection(p)
     ref = r.corners if r.found else None
     out: dict[str, Found] = {}

@@ -35,7 +35,7 @@ from .sources import SourceError, read_vnl_names
 
 def _detect_pose(seq, pose, layout, methods):
     p = dataset.load_pose(seq, pose, layout)
-    found = detect_methods(p.rotstar, layout, p.full_scale, p.checkerboard, methods)
+    found = detect_methods(p.rotstar, layout, p.full_scale, p.checkerboard, methods, identity=p.identity)
     cbfile = os.path.join(seq, pose, next(f["file"] for f in layout.frames() if f["kind"] == "checkerboard"))
     return pose, p.first_file, cbfile, found
 
