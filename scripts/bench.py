@@ -96,7 +96,7 @@ def measure(a) -> dict:
         log("calibrating with mrcal from each method's boards")
         cal = calibration.calibrate_all(scene, run.labelled, run.weights, tmp, log)
         speed_md, speed_run = speed.bench_speed(os.path.join(tmp, "speed-seq"), scene.layout,
-                                                [(p.rotstar, p.checker) for p in poses], a.bits, log=log)
+                                                [(p.rotstar, p.checker, p.identity) for p in poses], a.bits, log=log)
     layouts = {k: scene.layout_for(METHODS[k].needs) for k in run.results}
     summary = {k: scoring.summarize(rows, layouts[k].nx * layouts[k].ny) for k, rows in run.results.items()}
     g = scoring.goals(summary, run.results, {k: m.title for k, m in METHODS.items()},

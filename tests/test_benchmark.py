@@ -110,6 +110,7 @@ def test_failures_lists_what_went_wrong():
 # ---- a tiny scene, end to end -------------------------------------------------
 @pytest.fixture(scope="module")
 def tiny():
+    """Two poses of a 6 x 4 board with identity frames (and the 6 x 6 square board)"""
     layout = make_layout(screen=(800, 600), pitch=100, band=24)
     square = make_layout(screen=(1000, 1000), pitch=100, band=24, nx=6, ny=6)
     return scenes.make_scene(2, 0, 16, camera="pinhole-small", layout=layout, square=square)
@@ -135,6 +136,8 @@ def test_render_is_seeded_and_independent_of_processes(tiny):
         assert np.array_equal(a.checker_square, b.checker_square)
     p = one[0]
     assert p.rotstar.shape == (8, 400, 640) and p.rotstar.dtype == np.uint16
+    assert p.identity.shape == (tiny.layout.identity_code.nframes, 400, 640) and p.identity.dtype == np.uint16
+    assert np.array_equal(one[1].identity, two[1].identity)
     assert p.checker.dtype == np.float32 and p.checker.shape == (400, 640)
     assert not np.array_equal(one[0].checker, one[1].checker)
 
@@ -152,6 +155,18 @@ def test_detect_all_on_a_tiny_scene(tiny, tmp_path, restore_affinity):
     cal = calibration.calibrate_all(tiny, run.labelled, run.weights, str(tmp_path))
     assert list(cal)[:2] == ["rotstar", "rotstar-weighted"]
     assert all("too few" in c["error"] for c in cal.values())  # 2 boards
+
+
+def test_identity_frames_leave_the_other_images_alone(tiny):
+    """A layout without identity frames: the same 8 frames and checkerboards, no identity frames"""
+    import dataclasses
+
+    plain = dataclasses.replace(tiny, layout=dataclasses.replace(tiny.layout, identity=False))
+    a, b = scenes.render_all(tiny, 1)[0], scenes.render_all(plain, 1)[0]
+    assert b.identity is None and a.identity is not None
+    assert np.array_equal(a.rotstar, b.rotstar) and np.array_equal(a.checker, b.checker)
+    q = detection.pose_inputs("rotstar", tiny, a, 65535.0, None)
+    assert q.identity is a.identity and q.frames is a.rotstar
 
 
 def test_memory_probe_of_a_refiner(tiny, tmp_path, restore_affinity):

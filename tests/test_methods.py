@@ -13,8 +13,10 @@ from rotstar_mrcal.simulate.captures import averaged_captures
 
 @pytest.fixture(scope="module")
 def pose():
-    """A 6 x 4 board seen by a small pinhole camera: 8 frames, the 8-times averaged checkerboard, the truth"""
+    """A 6 x 4 board seen by a small pinhole camera: 8 frames, the identity frames, the 8-times averaged
+    checkerboard, the truth"""
     layout = make_layout(screen=(800, 600), pitch=100, band=24)
+    n = layout.nframes
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, layout, 1, np.random.default_rng(1))[0]
     screen = simulate.make_screen(simulate.exact_frames(layout), layout)
@@ -24,8 +26,8 @@ def pose():
     def expose(img):
         return simulate.expose(img, noise=0.01, bits=16, rng=rng)
 
-    return dict(layout=layout, frames=expose(E[:-1]), checker=averaged_captures(E[-1], expose, 8),
-                truth=simulate.true_corners(model, layout, rt))
+    return dict(layout=layout, frames=expose(E[:n]), identity=expose(E[n:-1]),
+                checker=averaged_captures(E[-1], expose, 8), truth=simulate.true_corners(model, layout, rt))
 
 
 def test_registry_entries_are_well_formed():
@@ -57,7 +59,8 @@ def test_unknown_names():
 
 @pytest.mark.parametrize("name", method_names(needs=("rotstar", "checkerboard")))
 def test_every_method_finds_the_board(pose, name):
-    p = PoseImages(pose["layout"], 65535.0, frames=pose["frames"], checkerboard=pose["checker"])
+    p = PoseImages(pose["layout"], 65535.0, frames=pose["frames"], checkerboard=pose["checker"],
+                   identity=pose["identity"])
     f = METHODS[name](p)
     assert isinstance(f, Found) and f.corners is not None, f.why
     if METHODS[name].relabel:
@@ -101,7 +104,7 @@ def test_detect_methods_reads_the_registry(pose):
     from rotstar_mrcal.validate.cornersets import dataset_methods, detect_methods
 
     assert dataset_methods() == method_names(needs=("rotstar", "checkerboard"))
-    found = detect_methods(pose["frames"], pose["layout"], 65535.0, pose["checker"])
+    found = detect_methods(pose["frames"], pose["layout"], 65535.0, pose["checker"], identity=pose["identity"])
     assert list(found) == dataset_methods()
     # a method without its own orientation is given rotstar's numbering
     assert np.nanmax(np.linalg.norm(found["opencv-sb"].corners - found["rotstar"].corners, axis=-1)) < 1

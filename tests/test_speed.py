@@ -5,6 +5,7 @@ import os
 import shutil
 
 import numpy as np
+import pytest
 
 from rotstar_mrcal import dataset
 from rotstar_mrcal.benchmark import speed
@@ -20,7 +21,8 @@ def test_measure_speed_on_two_poses(d435_seq, tmp_path):
     r = speed.measure_speed(str(seq), repeats=1)
     assert [p.pose for p in r.poses] == ["pose000", "pose001"] and all(p.found for p in r.poses)
     assert all(p.decode_s > 0 and p.detect_s > 0 for p in r.poses)
-    assert r.n_images == 18
+    assert r.n_images == 2 * len(d435_seq.layout.frames())  # 8 rotating-star, the identity frames, checkerboard
+    assert all(p.detect_plain_s > 0 for p in r.poses) and r.identity_share is not None  # with and without them
     # the command did everything the in-process calls did, and started up
     assert r.command_s > 0 and r.startup_s >= 0
     assert r.ratio_with_startup >= r.ratio
@@ -33,15 +35,17 @@ def test_measure_speed_on_two_poses(d435_seq, tmp_path):
 
 
 def test_speed_result_arithmetic():
-    poses = [speed.PoseSpeed("a", 0.1, 0.15, True), speed.PoseSpeed("b", 0.1, 0.25, True)]
+    poses = [speed.PoseSpeed("a", 0.1, 0.15, True, 0.12), speed.PoseSpeed("b", 0.1, 0.25, True, 0.25)]
     r = speed.SpeedResult(poses, command_s=1.0, mrgingham_s=4.0, n_images=18, repeats=1)
+    assert np.isclose(r.identity_share, 0.125)  # median of +25% and +0%
     assert r.ratio == 2.0  # median of 1.5 and 2.5
     assert np.isclose(r.startup_s, 0.4)
     assert np.isclose(r.ratio_with_startup, 4.0)  # (0.15 + 0.2) / 0.1 and (0.25 + 0.2) / 0.1
     assert r.command_vs_mrgingham == 0.25
     assert np.isclose(r.vs_mrgingham, (0.2 + 0.2) / 2.0)  # median detect + start-up share, per mrgingham pose
     g = r.goals()
-    assert not g["ratio"]["pass"] and g["mrgingham"]["pass"]
+    assert not g["ratio"]["pass"] and g["mrgingham"]["pass"] and not g["identity"]["pass"]
+    assert "+12.5% -> **FAIL**" in r.table()
 
 
 def test_write_dataset_round_trip(tmp_path):
@@ -49,8 +53,12 @@ def test_write_dataset_round_trip(tmp_path):
     rng = np.random.default_rng(0)
     frames = rng.integers(0, 65536, (8, 30, 40)).astype(np.float32)
     checker = rng.uniform(0, 65535, (30, 40))
-    seq = speed.write_dataset(str(tmp_path / "seq"), layout, [(frames, checker)], bits=16)
+    identity = rng.integers(0, 65536, (layout.identity_code.nframes, 30, 40)).astype(np.float32)
+    seq = speed.write_dataset(str(tmp_path / "seq"), layout, [(frames, checker, identity)], bits=16)
     p = dataset.load_pose(seq, "pose000", dataset.read_pattern(seq)[1])
     np.testing.assert_array_equal(p.rotstar, frames)
+    np.testing.assert_array_equal(p.identity, identity)
     np.testing.assert_array_equal(p.checkerboard, np.round(checker))
     assert p.full_scale == 65535.0
+    with pytest.raises(ValueError, match="identity frames"):
+        speed.write_dataset(str(tmp_path / "seq2"), layout, [(frames, checker, None)], bits=16)

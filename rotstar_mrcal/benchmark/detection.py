@@ -11,7 +11,8 @@ SYNOPSIS
 The methods are rotstar_mrcal.methods.METHODS (a variant, which gives
 another method's corners with weights, is not timed: its weights are kept
 for the calibration). A method's input (methods.PoseImages) holds only what
-it needs: the 8 rotating-star frames, the averaged checkerboard, or the
+it needs: the 8 rotating-star frames (and the identity frames, when the
+layout has them), the averaged checkerboard, or the
 square board as an 8-bit PNG. The methods that start from rotstar start from
 its labelled corners moved START_PERTURB_PX (scoring.perturbed_start), with
 its per-corner windows; rotstar runs first. Each method gets one untimed
@@ -55,7 +56,7 @@ def pose_inputs(name: str, scene: Scene, p: RenderedPose, full_scale: float, png
     m = METHODS[name]
     q = PoseImages(scene.layout_for(m.needs), full_scale)
     if m.needs == "rotstar":
-        q.frames = p.rotstar
+        q.frames, q.identity = p.rotstar, p.identity
     elif m.needs == "checkerboard":
         q.checkerboard = p.checker
     else:

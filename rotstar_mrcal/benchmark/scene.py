@@ -20,7 +20,10 @@ depend on the number of processes):
 - the checkerboard frame, CAPTURES captures averaged (the paper's fairness rule);
 - the checkerboard of a square SQUARE_N x SQUARE_N layout for mrgingham, seen
   with the same rotation and its centre where the 14 x 9 board's centre is,
-  CAPTURES captures averaged.
+  CAPTURES captures averaged;
+- the identity frames of the layout (none for make_layout(identity=False)),
+  one capture each, exposed last so that the images above do not depend on
+  whether the layout has them.
 """
 
 from __future__ import annotations
@@ -86,6 +89,7 @@ class RenderedPose:
     checker: np.ndarray  # (H, W) float32, mean of CAPTURES captures
     checker_square: np.ndarray  # (H, W) float32, the 9x9 board, mean of CAPTURES captures
     seconds: float
+    identity: np.ndarray | None = None  # (nidentity, H, W) uint8/uint16, one capture per frame, or None
 
 
 _W: dict = {}  # the worker's scene, rays and screens (init_renderer)
@@ -112,10 +116,13 @@ def render_pose(i: int) -> RenderedPose:
         return simulate.expose(E, gain=st.gain, black=st.black, noise=st.noise, bits=st.bits, rng=rng)
 
     kw = dict(supersample=st.supersample, psf=st.blur_px, sampling=st.sampling, rays=_W["rays"])
-    E = simulate.render_irradiance(_W["screen"], sc.model, sc.rts[i], **kw)  # 8 rotstar + checkerboard
+    E = simulate.render_irradiance(_W["screen"], sc.model, sc.rts[i], **kw)  # rotstar, identity, checkerboard
     Es = simulate.render_irradiance(_W["screen_square"], sc.model, sc.rts_square[i], **kw)
-    return RenderedPose(i, expose(E[:-1]), averaged_captures(E[-1], expose, CAPTURES),
-                        averaged_captures(Es[0], expose, CAPTURES), time.perf_counter() - t0)
+    n = sc.layout.nframes
+    rot = expose(E[:n])
+    checker, square = averaged_captures(E[-1], expose, CAPTURES), averaged_captures(Es[0], expose, CAPTURES)
+    identity = expose(E[n:-1]) if len(E) > n + 1 else None  # last: the images above as without identity frames
+    return RenderedPose(i, rot, checker, square, time.perf_counter() - t0, identity)
 
 
 def render_all(scene: Scene, jobs: int, log=None) -> list[RenderedPose]:

@@ -19,7 +19,10 @@ Per pose of the dataset, in this process:
 
 * decode: `dataset.load_pose`, i.e. reading and decoding every PNG of the
   pose folder into float32 arrays (what rotstar-detect does first);
-* detect: `detect_pose` on those frames with the default options.
+* detect: `detect_pose` on those frames with the default options (the
+  identity frames included, when the pattern has them);
+* detect without identity: the same call without the identity frames, when
+  the pattern has them: what decoding them adds (`identity_share`).
 
 For the whole dataset, in child processes:
 
@@ -34,7 +37,9 @@ the poses of the run, at most 2x the decoding (`ratio_with_startup`), and at
 most 0.5x mrgingham's time per pose on the same images (`vs_mrgingham`;
 mrgingham's time includes reading its images, as the issue's 0.63 s did).
 The whole rotstar-detect run against the whole mrgingham run, decoding on
-both sides, is given beside it (`command_vs_mrgingham`).
+both sides, is given beside it (`command_vs_mrgingham`). Issue 13's goal:
+reading the identity frames adds at most GOAL_IDENTITY to the detection
+time per pose (median over poses of detect / detect without identity - 1).
 """
 
 from __future__ import annotations
@@ -57,6 +62,7 @@ import numpy as np
 
 GOAL_RATIO = 2.0  # detect (start-up included) / decode
 GOAL_VS_MRGINGHAM = 0.5  # rotstar-detect / mrgingham on the same images
+GOAL_IDENTITY = 0.10  # detect / detect without the identity frames - 1
 
 
 @dataclasses.dataclass
@@ -65,10 +71,16 @@ class PoseSpeed:
     decode_s: float  # CPU s, dataset.load_pose
     detect_s: float  # CPU s, detect_pose
     found: bool
+    detect_plain_s: float | None = None  # CPU s, detect_pose without the identity frames (None: the pose has none)
 
     @property
     def ratio(self) -> float:
         return self.detect_s / self.decode_s
+
+    @property
+    def identity_share(self) -> float | None:
+        """What the identity frames add to detect_pose, as a fraction of its time without them"""
+        return self.detect_s / self.detect_plain_s - 1 if self.detect_plain_s else None
 
 
 @dataclasses.dataclass
@@ -124,6 +136,12 @@ class SpeedResult:
         return self.detect_with_startup_s / (self.mrgingham_s / self.n) if self.mrgingham_s else None
 
     @property
+    def identity_share(self) -> float | None:
+        """median over poses of detect / detect without the identity frames - 1; None without identity frames"""
+        v = [p.identity_share for p in self.poses if p.identity_share is not None]
+        return float(np.median(v)) if v else None
+
+    @property
     def command_vs_mrgingham(self) -> float | None:
         """the whole rotstar-detect run (decoding included) / the whole mrgingham run"""
         return self.command_s / self.mrgingham_s if self.mrgingham_s else None
@@ -135,6 +153,10 @@ class SpeedResult:
             out["mrgingham"] = {"goal": f"detection (start-up included) <= {GOAL_VS_MRGINGHAM:g} x mrgingham's time "
                                         "on the same images",
                                 "value": self.vs_mrgingham, "pass": bool(self.vs_mrgingham <= GOAL_VS_MRGINGHAM)}
+        if self.identity_share is not None:
+            out["identity"] = {"goal": f"the identity frames add <= {GOAL_IDENTITY:.0%} to detection (detect / "
+                                       "detect without them - 1, median per pose)",
+                               "value": self.identity_share, "pass": bool(self.identity_share <= GOAL_IDENTITY)}
         return out
 
     def table(self) -> str:
@@ -153,8 +175,13 @@ class SpeedResult:
             f"| {self.command_s / n:.3f} | {cvs} |",
             "",
         ]
-        for g in self.goals().values():
-            lines.append(f"- {g['goal']}: {g['value']:.2f} -> **{'PASS' if g['pass'] else 'FAIL'}**")
+        for k, g in self.goals().items():
+            v = f"{g['value']:+.1%}" if k == "identity" else f"{g['value']:.2f}"
+            lines.append(f"- {g['goal']}: {v} -> **{'PASS' if g['pass'] else 'FAIL'}**")
+        if self.identity_share is not None:
+            plain = float(np.median([p.detect_plain_s for p in self.poses if p.detect_plain_s]))
+            lines.append(f"- detect without the identity frames: {plain:.3f} s per pose (median), with them "
+                         f"{self.detect_s:.3f} s")
         lines.append(f"- rotstar-detect's start-up and fixed cost (one process, {n} poses): {self.startup_s:.3f} s; "
                      f"the whole run {self.command_s:.2f} s, decoding included; slowest pose: decode "
                      f"{max(p.decode_s for p in self.poses):.3f} s, detect {max(p.detect_s for p in self.poses):.3f} s")
@@ -166,6 +193,7 @@ class SpeedResult:
                 "repeats": self.repeats, "in_process_s": self.in_process_s, "decode_s_median": self.decode_s, "detect_s_median": self.detect_s,
                 "ratio_median": self.ratio, "startup_s": self.startup_s,
                 "ratio_with_startup": self.ratio_with_startup, "detect_with_startup_s": self.detect_with_startup_s,
+                "identity_share": self.identity_share,
                 "vs_mrgingham": self.vs_mrgingham, "command_vs_mrgingham": self.command_vs_mrgingham,
                 "goals": self.goals()}
 
@@ -221,21 +249,26 @@ def measure_speed(seq: str, repeats: int = 3, mrgingham: bool = True, log=None) 
     images = sorted(glob.glob(os.path.join(glob.escape(seq), "*", "*.png")))
     with one_cpu():
         p = dataset.load_pose(seq, names[0], frames)
-        detect_pose(p.rotstar, layout, full_scale=p.full_scale)  # warm-up
-        t = np.zeros((repeats, len(names), 2))  # (run, pose, decode | detect)
+        detect_pose(p.rotstar, layout, full_scale=p.full_scale, identity=p.identity)  # warm-up
+        t = np.full((repeats, len(names), 3), np.nan)  # (run, pose, decode | detect | detect without identity)
         found = []
         for k in range(repeats):  # whole passes over the poses, as the command makes one
             for i, name in enumerate(names):
                 t0 = time.process_time()
                 p = dataset.load_pose(seq, name, frames)
                 t1 = time.process_time()
-                r = detect_pose(p.rotstar, layout, full_scale=p.full_scale)
-                t[k, i] = t1 - t0, time.process_time() - t1
+                r = detect_pose(p.rotstar, layout, full_scale=p.full_scale, identity=p.identity)
+                t[k, i, :2] = t1 - t0, time.process_time() - t1
+                if p.identity is not None:
+                    t2 = time.process_time()
+                    detect_pose(p.rotstar, layout, full_scale=p.full_scale)
+                    t[k, i, 2] = time.process_time() - t2
                 if k == 0:
                     found.append(r.found)
         med = np.median(t, axis=0)
-        poses = [PoseSpeed(name, float(d), float(e), f) for name, (d, e), f in zip(names, med, found)]
-        in_process_s = float(t.sum(axis=(1, 2)).min())
+        poses = [PoseSpeed(name, float(d), float(e), f, None if np.isnan(e0) else float(e0))
+                 for name, (d, e, e0), f in zip(names, med, found)]
+        in_process_s = float(t[..., :2].sum(axis=(1, 2)).min())
         log(f"  speed: decode + detect of {len(names)} poses in this process, {repeats} runs each")
         with tempfile.TemporaryDirectory(prefix="rotstar-speed-") as tmp:
             cmd = detect_command() + [seq, "-q", "--no-hint", "-o", os.path.join(tmp, "corners.vnl")]
@@ -264,11 +297,11 @@ def profile_pose(seq: str, pose: str | None = None, top: int = 12, runs: int = 5
     pose = pose or dataset.list_poses(seq, pattern["frames"])[0]
     p = dataset.load_pose(seq, pose, pattern["frames"])
     with one_cpu():
-        detect_pose(p.rotstar, layout, full_scale=p.full_scale)  # warm-up
+        detect_pose(p.rotstar, layout, full_scale=p.full_scale, identity=p.identity)  # warm-up
         prof = cProfile.Profile()
         prof.enable()
         for _ in range(runs):
-            detect_pose(p.rotstar, layout, full_scale=p.full_scale)
+            detect_pose(p.rotstar, layout, full_scale=p.full_scale, identity=p.identity)
         prof.disable()
     st = pstats.Stats(prof).stats  # {(file, line, name): (cc, nc, tt, ct, callers)}
     rows = sorted(st.items(), key=lambda kv: -kv[1][2])[:top]
@@ -290,31 +323,39 @@ def profile_table(entries: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def write_dataset(folder: str, layout, poses: list[tuple[np.ndarray, np.ndarray | None]], bits: int) -> str:
-    """A dataset folder from in-memory captures: [(rotstar frames (8, H, W), checkerboard (H, W) or None)]
+def write_dataset(folder: str, layout, poses: list[tuple], bits: int) -> str:
+    """A dataset folder from in-memory captures: [(rotstar frames (8, H, W), checkerboard (H, W) or None,
+    identity frames (nidentity, H, W) or None)]
 
     Frames are written as 8- or 16-bit PNGs (values rounded and clipped), one
-    folder per pose named pose000, pose001, ...
+    folder per pose named pose000, pose001, ... A layout with identity frames
+    needs them (ValueError otherwise: the dataset would be incomplete).
     """
     from .. import dataset
 
     dtype, top = (np.uint8, 255) if bits == 8 else (np.uint16, 65535)
     names = {f["kind"]: f["file"] for f in layout.frames() if f["kind"] == "checkerboard"}
     rot = [f["file"] for f in layout.frames() if f["kind"] == "rotstar"]
+    ident = [f["file"] for f in layout.frames() if f["kind"] == "identity"]
     dataset.write_pattern(folder, layout)
 
     def q(a):
         return np.clip(np.round(a), 0, top).astype(dtype)
 
-    for i, (frames, checker) in enumerate(poses):
+    for i, (frames, checker, identity) in enumerate(poses):
         imgs = {fn: q(f) for fn, f in zip(rot, frames)}
+        if ident:
+            if identity is None or len(identity) != len(ident):
+                raise ValueError(f"pose {i}: the layout has {len(ident)} identity frames, the capture "
+                                 f"{0 if identity is None else len(identity)}")
+            imgs.update({fn: q(f) for fn, f in zip(ident, identity)})
         if checker is not None and "checkerboard" in names:
             imgs[names["checkerboard"]] = q(checker)
         dataset.write_pose(folder, f"pose{i:03d}", imgs)
     return folder
 
 
-def bench_speed(folder: str, layout, poses: list[tuple[np.ndarray, np.ndarray | None]], bits: int,
+def bench_speed(folder: str, layout, poses: list[tuple], bits: int,
                 repeats: int = 3, log=None) -> tuple[str, dict]:
     """make bench's speed section: (Markdown, dict for bench.json)
 
