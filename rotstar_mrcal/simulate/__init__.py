@@ -21,26 +21,28 @@ Modules, one concept each:
     render    rays -> board plane -> screen, area-sampled sub-pixels, PSF, blocks
     optics    point-spread functions on the supersampled image
     exposure  gain, black level, noise, saturation, 8/16-bit quantisation
-    poses     random calibration poses that keep the board inside the image
+    poses     random calibration poses that keep the board inside the image;
+              boards hanging over the image's edges (partial views)
+    visibility  which corners a detector can report: true refinement windows, in view
     dataset   write a dataset + truth.json/truth.cameramodel; load the truth
 
 See doc/simulator.md.
 """
 
-from .camera import PRESETS, RayGrid, camera_rays, preset_model
+from .camera import PRESETS, RayGrid, camera_rays, fov_deg, preset_model
 from .dataset import Settings, Truth, load_truth, pose_names, render_pose, true_corners, write_dataset
 from .exposure import expose, full_scale_code
 from .optics import GaussianPSF, KernelPSF, TiledPSF, as_psf, gaussian_kernel
-from .poses import default_distance_range, look_at_pose, pose_ok, random_poses, tilt_angle
+from .poses import default_distance_range, hanging_poses, look_at_pose, pose_ok, random_poses, tilt_angle
 from .irradiance import render_irradiance
 from .screen import Screen, exact_frames, make_screen, png_frames
 
 __all__ = [
-    "PRESETS", "RayGrid", "camera_rays", "preset_model",
+    "PRESETS", "RayGrid", "camera_rays", "fov_deg", "preset_model",
     "Settings", "Truth", "load_truth", "pose_names", "render_pose", "true_corners", "write_dataset",
     "expose", "full_scale_code",
     "GaussianPSF", "KernelPSF", "TiledPSF", "as_psf", "gaussian_kernel",
-    "default_distance_range", "look_at_pose", "pose_ok", "random_poses", "tilt_angle",
+    "default_distance_range", "hanging_poses", "look_at_pose", "pose_ok", "random_poses", "tilt_angle",
     "render_irradiance",
     "Screen", "exact_frames", "make_screen", "png_frames",
 ]

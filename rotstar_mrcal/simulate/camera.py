@@ -2,10 +2,12 @@
 
 SYNOPSIS
 
-    >>> from rotstar_mrcal.simulate.camera import preset_model, camera_rays
+    >>> from rotstar_mrcal.simulate.camera import preset_model, camera_rays, fov_deg
     >>> model = preset_model("d435")
     >>> model.intrinsics()[0], tuple(int(v) for v in model.imagersize())
     ('LENSMODEL_OPENCV8', (1280, 800))
+    >>> fov_deg(preset_model("wide")).round(1)  # horizontal, vertical, diagonal
+    array([111.5,  79. , 122.9])
     >>> grid = camera_rays(preset_model("pinhole-small"))   # unprojected once, then cached
     >>> grid.rays.shape                      # (H + 2 pad, W + 2 pad, 3)
     (416, 656, 3)
@@ -52,6 +54,19 @@ PRESETS: dict[str, dict] = {
         intrinsics=(640.0, 640.0, 638.5, 401.0, -0.05, 0.04, 5e-4, -3e-4, -0.01, 0.0, 0.0, 0.0),
         description="Intel RealSense D435 left IR, 1280x800 Y16, mild OPENCV8 distortion",
     ),
+    # A wide-angle lens, ~112 degrees across the 1280 px width (79 across the
+    # height, 123 on the diagonal), with strong barrel distortion from the
+    # rational terms: r_d = r (1 + k1 r^2 + k2 r^4) / (1 + k4 r^2) shrinks the
+    # image edge to 0.84 and the corners to 0.79 of a pinhole's. The radial
+    # map is monotonic for every r (d r_d / d r > 0 as 3 k1 > k4), so it never
+    # folds; the image corners are at r = 1.84 (61 degrees off axis).
+    "wide": dict(
+        lensmodel="LENSMODEL_OPENCV8",
+        imagersize=(1280, 800),
+        # fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6
+        intrinsics=(520.0, 520.0, 641.0, 398.5, 0.1, 0.002, 2e-4, -1e-4, 0.0, 0.2137, 0.0, 0.0),
+        description="wide-angle, 1280x800, ~112 degrees horizontal, strong barrel OPENCV8 distortion",
+    ),
     # A small pinhole camera for tests and quick experiments
     "pinhole-small": dict(
         lensmodel="LENSMODEL_PINHOLE",
@@ -78,6 +93,19 @@ def preset_model(name: str) -> mrcal.cameramodel:
         intrinsics=(p["lensmodel"], np.array(p["intrinsics"], float)),
         imagersize=np.array(p["imagersize"]),
     )
+
+
+def fov_deg(model: mrcal.cameramodel) -> np.ndarray:
+    """Field of view (horizontal, vertical, diagonal), degrees: the angles between opposite image edges' rays
+
+    Through the principal point for the horizontal and vertical ones; corner
+    to corner for the diagonal.
+    """
+    W, H = (float(v) for v in model.imagersize())
+    cx, cy = model.intrinsics()[1][2:4]
+    q = np.array(((-0.5, cy), (W - 0.5, cy), (cx, -0.5), (cx, H - 0.5), (-0.5, -0.5), (W - 0.5, H - 0.5)))
+    v = mrcal.unproject(q, *model.intrinsics(), normalize=True).reshape(3, 2, 3)
+    return np.degrees(np.arccos(np.clip(np.sum(v[:, 0] * v[:, 1], axis=-1), -1, 1)))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -28,14 +28,35 @@ random_poses draws, per pose:
 - the distance from the camera centre to that board centre, uniform in the
   distance range;
 - the tilt: the angle between the board normal and the line of sight to the
-  board centre, uniform in [0, max_tilt], about an in-plane axis of uniform
-  direction;
+  board centre, uniform in [min_tilt, max_tilt] (0-60 degrees by default),
+  about an in-plane axis of uniform direction;
 - the roll about the board normal, uniform in [0, 2 pi).
 
 A pose is kept only if pose_ok: the whole band lattice is in front of the
 camera, seen from the front, projects inside the image with a margin, and the
 projection does not fold (the Jacobian of board -> image keeps its sign and
 mrcal.unproject gives back the same rays).
+
+hanging_poses draws boards that hang over the imager's edges and corners
+(the partial views of a calibration that fills the image), per pose:
+
+- the image point of the board centre: near one of the 4 image corners or
+  on one of the 4 edges (equally likely), up to HANG_INSET of the image's
+  width and height inside;
+- the distance: uniform in (0.5 x the near end, the far end) of
+  default_distance_range (closer than random_poses: larger elements);
+- tilt (uniform in [0, max_tilt_deg]), tilt axis and roll as random_poses;
+
+and keeps it when the camera sees the screen from the front and the fraction
+of corners in view (visibility.in_view: the corner's refinement window inside
+the image) lies in the `in_view` range.
+
+    >>> from rotstar_mrcal.simulate.poses import hanging_poses
+    >>> from rotstar_mrcal.simulate.visibility import in_view
+    >>> rt = hanging_poses(model, layout, 3, np.random.default_rng(0))
+    >>> f = [in_view(model, layout, r).mean() for r in rt]
+    >>> all(0.3 <= v <= 0.75 for v in f)
+    True
 """
 
 from __future__ import annotations
@@ -47,6 +68,9 @@ import numpy as np
 
 from ..pattern.layout import Layout, make_layout
 from .screen import screen_to_board
+from .visibility import in_view as in_view_mask
+
+HANG_INSET = 0.25  # the centre of a hanging board: at most this fraction of the image size inside an edge
 
 REFERENCE_DISTANCE_M = (0.3, 0.6)
 """Distance range for the D435 preset (fx / W = 0.5) and the default layout"""
@@ -188,18 +212,20 @@ def random_poses(
     max_tilt_deg: float = 60.0,
     margin_px: float | None = None,
     max_tries: int = 400,
+    min_tilt_deg: float = 0.0,
 ) -> np.ndarray:
     """n random valid poses (n, 6) spread over the imager; see the module docstring
 
     distance defaults to default_distance_range(model, layout); margin_px to
-    2% of the image width. Raises RuntimeError if a pose cannot be placed
-    (board too large for the image at these distances).
+    2% of the image width; the tilt is uniform in [min_tilt_deg,
+    max_tilt_deg]. Raises RuntimeError if a pose cannot be placed (board too
+    large for the image at these distances).
     """
     rng = np.random.default_rng(rng)
     W, H = (float(v) for v in model.imagersize())
     dmin, dmax = default_distance_range(model, layout) if distance is None else distance
     margin = 0.02 * W if margin_px is None else margin_px
-    max_tilt = math.radians(max_tilt_deg)
+    max_tilt, min_tilt = math.radians(max_tilt_deg), math.radians(min_tilt_deg)
     gx = max(1, math.ceil(math.sqrt(n * W / H)))
     gy = max(1, math.ceil(n / gx))
     cells = rng.permutation(gx * gy)
@@ -216,7 +242,7 @@ def random_poses(
                 layout,
                 target,
                 rng.uniform(dmin, dmax),
-                tilt=rng.uniform(0, max_tilt),
+                tilt=rng.uniform(min_tilt, max_tilt),
                 tilt_axis=rng.uniform(0, 2 * math.pi),
                 roll=rng.uniform(0, 2 * math.pi),
             )
@@ -228,4 +254,54 @@ def random_poses(
                 f"could not place pose {i} after {max_tries} tries: the board does not fit "
                 f"at {dmin:.3g}-{dmax:.3g} m with tilts up to {max_tilt_deg:g} deg"
             )
+    return out
+
+
+def hang_target(rng: np.random.Generator, W: float, H: float) -> np.ndarray:
+    """An image point near an image corner or on an edge, up to HANG_INSET inside (see the module doc)"""
+    inset = rng.uniform(0, HANG_INSET, 2) * (W, H)
+    far = rng.random(2) < 0.5  # which corner, or which edge
+    xy = np.where(far, (W - 1, H - 1) - inset, inset)
+    if rng.random() < 0.5:  # an edge: free along one axis
+        k = rng.integers(2)
+        xy[k] = rng.uniform(0, (W - 1, H - 1)[k])
+    return xy
+
+
+def hanging_poses(
+    model: mrcal.cameramodel,
+    layout: Layout,
+    n: int,
+    rng: np.random.Generator | int | None = None,
+    *,
+    in_view: tuple[float, float] = (0.3, 0.75),
+    max_tilt_deg: float = 60.0,
+    distance: tuple[float, float] | None = None,
+    max_tries: int = 5000,
+) -> np.ndarray:
+    """n poses (n, 6) of boards hanging over the imager's edges and corners; see the module docstring
+
+    in_view: the range of the fraction of corners in view (both ends
+    included); distance defaults to (0.5 near, far) of
+    default_distance_range. Raises RuntimeError when max_tries draws give no
+    pose.
+    """
+    rng = np.random.default_rng(rng)
+    W, H = (float(v) for v in model.imagersize())
+    if distance is None:
+        d0, d1 = default_distance_range(model, layout)
+        distance = (0.5 * d0, d1)
+    max_tilt = math.radians(max_tilt_deg)
+    out = np.empty((n, 6))
+    for i in range(n):
+        for _ in range(max_tries):
+            rt = look_at_pose(model, layout, hang_target(rng, W, H), rng.uniform(*distance),
+                              tilt=rng.uniform(0, max_tilt), tilt_axis=rng.uniform(0, 2 * math.pi),
+                              roll=rng.uniform(0, 2 * math.pi))
+            if in_view[0] <= in_view_mask(model, layout, rt).mean() <= in_view[1]:
+                out[i] = rt
+                break
+        else:
+            raise RuntimeError(f"no pose with {in_view[0]:.0%}-{in_view[1]:.0%} of the corners in view after "
+                               f"{max_tries} draws")
     return out
