@@ -1,16 +1,19 @@
 #!/usr/bin/env python3
-"""make bench: corner accuracy and speed of rotstar against OpenCV and mrgingham
+"""make bench: corner accuracy and speed of rotstar against OpenCV and mrgingham, and partial views
 
 SYNOPSIS
 
-    python scripts/bench.py                 # 20 poses, 16-bit, results in bench-out/
-    python scripts/bench.py --quick         # 4 poses, a smoke run
+    python scripts/bench.py                 # 20 poses, 16-bit, 234 partial views; results in bench-out/
+    python scripts/bench.py --quick         # 4 poses, 9 partial views: a smoke run
     python scripts/bench.py --poses 40 --bits 8 --jobs 2 --out /tmp/b
+    python scripts/bench.py --partial 0 --whole 0       # without the partial views
 
-Prints one Markdown table (stdout) with the goals evaluated beneath it; writes
-bench.json, bench.md and error-cdf.png into --out. Progress goes to stderr.
-A run with the documented settings (20 poses, seed 0, 16-bit) also rewrites
-the marked blocks of --doc (doc/benchmark.md; '' for none) and README.md.
+Prints the Markdown tables (stdout) with the goals evaluated beneath them;
+writes bench.json, bench.md and error-cdf.png into --out. Progress goes to
+stderr. A run with the documented settings (20 poses, seed 0, 16-bit, 34
+hanging views per lens and condition, 10 whole boards per condition) also
+rewrites the marked blocks of --doc (doc/benchmark.md; '' for none) and
+README.md.
 
 The scene, the methods, the scoring, the timing and the memory are the
 package's; this script only strings them together:
@@ -25,6 +28,7 @@ package's; this script only strings them together:
     rotstar_mrcal.benchmark.speed        decode and detect time per pose, start-up, mrgingham, profile
     rotstar_mrcal.benchmark.tables       the Markdown tables, bench.json, README's sentence
     rotstar_mrcal.benchmark.plots        the corner error CDF
+    rotstar_mrcal.benchmark.partial      partial views: boards over the image's edges, rotstar against ChArUco
 
 See doc/benchmark.md.
 """
@@ -47,14 +51,14 @@ import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 
-from rotstar_mrcal.benchmark import calibration, detection, scene as scenes, scoring, tables  # noqa: E402
+from rotstar_mrcal.benchmark import calibration, detection, partial, scene as scenes, scoring, tables  # noqa: E402
 from rotstar_mrcal.benchmark.plots import plot_cdf  # noqa: E402
 from rotstar_mrcal.docblock import rewrite_block  # noqa: E402
 from rotstar_mrcal.benchmark import speed  # noqa: E402
 from rotstar_mrcal.methods import METHODS  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOCUMENTED = {"poses": 20, "seed": 0, "bits": 16}  # the run doc/benchmark.md shows
+DOCUMENTED = {"poses": 20, "seed": 0, "bits": 16, "partial": 34, "whole": 10}  # the run doc/benchmark.md shows
 
 
 def log(msg: str) -> None:
@@ -65,27 +69,61 @@ def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--poses", type=int, default=20, help="random poses (default 20)")
-    p.add_argument("--quick", action="store_true", help="smoke run: 4 poses")
+    p.add_argument("--quick", action="store_true", help="smoke run: 4 poses, --partial 1 --whole 1")
+    p.add_argument("--partial", type=int, default=34,
+                   help="partial views: boards hanging over the image's edges, per lens (2) and condition (3) "
+                        "(default 34: 204 views; 0: none)")
+    p.add_argument("--whole", type=int, default=10,
+                   help="partial views' whole boards on the wide-angle lens at 30-65 degrees, per condition "
+                        "(default 10)")
     p.add_argument("--seed", type=int, default=0, help="poses and noise (default 0)")
     p.add_argument("--bits", type=int, choices=(8, 16), default=16, help="image depth (default 16)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
-                   help="processes for rendering only; detectors are always timed on one core (default: all cores)")
+                   help="processes for rendering (and the partial views' detection); the benchmark's detectors are "
+                        "always timed on one core (default: all cores)")
     p.add_argument("--out", default="bench-out", help="folder for bench.json, bench.md, error-cdf.png")
     p.add_argument("--doc", default=os.path.join(ROOT, "doc", "benchmark.md"),
                    help="with the documented settings, rewrite the marked blocks of this file (results, "
                         "calibration, speed) and README.md's summary (default: doc/benchmark.md; '' for none)")
     a = p.parse_args(argv)
     if a.quick:
-        a.poses = 4
+        a.poses, a.partial, a.whole = 4, 1, 1
     if a.poses < 1:
         p.error("--poses must be at least 1")
+    if a.partial < 0 or a.whole < 0:
+        p.error("--partial and --whole must be at least 0")
     return a
+
+
+def measure_partial(a) -> dict | None:
+    """The partial views (in --jobs processes, before the detectors are pinned to one CPU), or None"""
+    if not (a.partial or a.whole):
+        return None
+    t0 = time.perf_counter()
+    views = partial.make_views(a.partial, a.whole, a.seed)
+    log(f"partial views: {len(views)} views, each rendered, exposed and detected by rotstar and ChArUco "
+        f"({a.jobs} process(es)) ...")
+    res = partial.run_views(views, a.seed, max(1, a.jobs), log=log)
+    s = partial.summarize(res)
+    log(f"partial views: {time.perf_counter() - t0:.0f} s")
+    return {"results": res, "summary": s, "wall": time.perf_counter() - t0}
+
+
+def partial_text(a, part: dict) -> str:
+    """The partial-view section: set-up, the two tables, the goals, notes"""
+    s = part["summary"]
+    return "\n\n".join([partial.setup_line(a.partial, a.whole, a.seed),
+                         "Boards hanging over the image's edges (in view: the corner's refinement window inside the "
+                         "image; doc/benchmark.md, *Partial views*):",
+                         partial.hanging_table(s), "Whole boards:", partial.whole_table(s), partial.goal_lines(s),
+                         partial.notes(s)])
 
 
 def measure(a) -> dict:
     """Render, detect, calibrate, score: everything the outputs are made of"""
     t0 = time.perf_counter()
     started = datetime.datetime.now().astimezone()
+    part = measure_partial(a)
     if shutil.which("mrgingham") is None:
         log("note: mrgingham is not installed (Debian package 'mrgingham'); its rows are skipped")
     scene = scenes.make_scene(a.poses, a.seed, a.bits)
@@ -102,7 +140,7 @@ def measure(a) -> dict:
     g = scoring.goals(summary, run.results, {k: m.title for k, m in METHODS.items()},
                       {k for k, m in METHODS.items() if m.start == "own"})
     return dict(scene=scene, run=run, cal=cal, summary=summary, goals=g, speed=[speed_md] if speed_md else [],
-                speed_run=speed_run, started=started,
+                speed_run=speed_run, started=started, partial=part,
                 render=t_render, wall=time.perf_counter() - t0, machine=tables.machine())
 
 
@@ -116,12 +154,17 @@ def write_outputs(a, m: dict, text: dict) -> None:
           text["table"], text["goals"], text["cal_title"], text["cal_table"],
           "Poses a method did not get complete and right:\n\n" + tables.failures(run.results),
           tables.notes(run.memory_pose, run.batch, a.poses, "mrgingham" in run.results), *m["speed"]]
+    if m["partial"]:
+        md += ["## Partial views", text["partial"]]
     with open(os.path.join(a.out, "bench.md"), "w") as f:
         f.write("\n\n".join(md) + "\n")
     doc = tables.bench_json(m["started"], m["machine"], m["wall"], m["render"], a.jobs, sc, run, m["summary"],
                             m["goals"], m["cal"], calibration.CAL_LENSMODEL, scenes.CAPTURES)
     if m["speed_run"] is not None:
         doc["speed"] = m["speed_run"]
+    if m["partial"]:
+        doc["partial"] = partial.to_dict(m["partial"]["results"], m["partial"]["summary"]) | {
+            "settings": {"partial": a.partial, "whole": a.whole, "seed": a.seed}, "wall_s": m["partial"]["wall"]}
     with open(os.path.join(a.out, "bench.json"), "w") as f:
         json.dump(doc, f, indent=1)
         f.write("\n")
@@ -138,6 +181,12 @@ def write_docs(a, m: dict, text: dict) -> None:
     blocks = [(a.doc, "bench:result", result), (a.doc, "bench:calibration", text["cal_table"]),
               (os.path.join(ROOT, "README.md"), "bench:summary", tables.summary_sentence(m["summary"], m["cal"],
                                                                                           a.poses))]
+    if m["partial"]:
+        when = f"{m['started']:%Y-%m-%d %H:%M %Z}, {m['machine']['cpu']}, {m['machine']['cores']} cores"
+        blocks += [(a.doc, "bench:partial", f"{when}; wall time {m['partial']['wall']:.0f} s with {a.jobs} "
+                                            f"process(es).\n\n{text['partial']}"),
+                   (os.path.join(ROOT, "README.md"), "bench:partial",
+                    partial.summary_sentence(m["partial"]["summary"]))]
     if m["speed"]:
         when = f"{m['started']:%Y-%m-%d %H:%M %Z}, {m['machine']['cpu']}, {m['machine']['cores']} cores"
         setup = tables.setup_line(sc, tilts, dist, scenes.CAPTURES)
@@ -152,14 +201,17 @@ def main(argv=None) -> int:
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))  # workers stopped on the way out
     m = measure(a)
     text = {"table": tables.accuracy_table(m["summary"], m["run"].memory), "goals": tables.goal_lines(m["goals"]),
+            "partial": partial_text(a, m["partial"]) if m["partial"] else "",
             "cal_title": f"Calibration with mrcal ({calibration.CAL_LENSMODEL}) from each method's correct boards, "
                          "against the true camera over the imager (at infinity, board poses aligned with the true "
                          "ones):",
             "cal_table": tables.calibration_table(m["cal"])}
-    print("\n\n".join([text["table"], text["goals"], text["cal_title"], text["cal_table"], *m["speed"]]))
+    print("\n\n".join([text["table"], text["goals"], text["cal_title"], text["cal_table"], *m["speed"],
+                       *(["## Partial views", text["partial"]] if m["partial"] else [])]))
     sys.stdout.flush()
     write_outputs(a, m, text)
-    if a.doc and {"poses": a.poses, "seed": a.seed, "bits": a.bits} == DOCUMENTED:
+    settings = {"poses": a.poses, "seed": a.seed, "bits": a.bits, "partial": a.partial, "whole": a.whole}
+    if a.doc and settings == DOCUMENTED:
         write_docs(a, m, text)
     return 0
 

@@ -197,6 +197,7 @@ def test_rewrite_block(tmp_path):
 def test_docs_have_the_blocks_the_commands_write():
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     for path, name in (("README.md", "bench:summary"), ("doc/benchmark.md", "bench:result"),
+                       ("README.md", "bench:partial"), ("doc/benchmark.md", "bench:partial"),
                        ("doc/benchmark.md", "bench:calibration"), ("README.md", "demo:headline"),
                        ("doc/validation.md", "demo:headline")):
         with open(os.path.join(root, path)) as f:

@@ -153,6 +153,6 @@ def test_a_few_views(layout, restore_threads):
     assert s[("all", "hanging", "all", "charuco")]["views"] == 2
     tab = partial.hanging_table(s)
     assert tab.count("\n") == 4 and "| d435 | clean | 1 |" in tab and "**all**" in tab
-    assert "| wide | read noise 6 DN | 1 | 1/1 |" in partial.whole_table(s)
+    assert "| wide | read noise 6 DN | 1 | 1/1 | 100.0 % | 0 |" in partial.whole_table(s)
     assert "**FAIL**" in partial.goal_lines(s)  # 2 hanging views are not 200
     assert partial.summary_sentence(s).startswith("On 2 simulated views")

@@ -309,10 +309,10 @@ def _row(summary, key, lens, cond, bold=False) -> str:
 
 
 def whole_table(summary: dict) -> str:
-    """Markdown: the whole boards on the wide lens, per condition: poses complete, wrong labels, RMS"""
+    """Markdown: the whole boards on the wide lens, per condition: complete, reported, wrong labels, RMS"""
     head = ["lens", "condition", "poses"]
     for m in METHODS:
-        head += [f"{TITLES[m]}: complete", "wrong labels", "RMS px"]
+        head += [f"{TITLES[m]}: complete", "reported", "wrong labels", "RMS px"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for cond in CONDITIONS:
         key = (WHOLE_LENS, "whole", cond)
@@ -321,7 +321,7 @@ def whole_table(summary: dict) -> str:
         cells = [WHOLE_LENS, cond, str(summary[key + (METHODS[0],)]["views"])]
         for m in METHODS:
             s = summary[key + (m,)]
-            cells += [f"{s['complete']}/{s['views']}", str(s["wrong"]), _px(s["rms_px"])]
+            cells += [f"{s['complete']}/{s['views']}", _pct(s["reported_fraction"]), str(s["wrong"]), _px(s["rms_px"])]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -357,7 +357,7 @@ def goal_lines(summary: dict) -> str:
                          f"{_pct(ch_h['reported_fraction'])})")
         elif k == "wrong":
             lines.append(f"- {g['goal']}: rotstar {g['value']} wrong labels in {g['views']} views -> {verdict} "
-                         f"(ChArUco {ch_h['wrong']} in {ch_h['wrong_views']} views)")
+                         f"(ChArUco {ch_h['wrong']}, in {ch_h['wrong_views']} of the views)")
         else:
             lines.append(f"- {g['goal']}: rotstar {g['value']}/{g['views']} -> {verdict} (ChArUco "
                          f"{ch_w['complete']}/{ch_w['views']})")
