@@ -13,8 +13,9 @@ printed before it runs:
 1. rotstar-pattern (the screen's frames and pattern.json);
 2. rendering and detection (here, in --jobs processes, rotstar_mrcal.demo.capture):
    every method on every pose and exposure, written as corners.vnl files next
-   to each group's truth; mrgingham on a square 9 x 9 checkerboard seen from
-   the same poses;
+   to each group's truth; OpenCV's ChArUco detector on a ChArUco board whose
+   corners are the grid's (pattern.charuco), at the same poses; mrgingham on
+   a square 9 x 9 checkerboard seen from the same poses;
 3. rotstar-crossval per exposure: every corner set calibrated on A and on B
    with mrcal-calibrate-cameras, tested both ways (held-out MRE),
    cross-validated (projection diff vs uncertainty) and compared with the
@@ -94,12 +95,13 @@ def corner_sets(a, out: str) -> tuple[dict, dict]:
     npose = {g: len(v) for g, v in rts.items()}
     methods = method_names(needs=("rotstar", "checkerboard"), demo=True)
     log(f"rendering {sum(npose.values())} poses once, exposing and detecting at {len(scene.EXPOSURES)} exposures "
-        f"({', '.join(methods)}) in {a.jobs} processes")
-    res = capture.capture_all(a.jobs, layout, square, model, rts, rts_sq, a.seed, out, a.keep_images, methods, log)
+        f"({', '.join(methods)}, ChArUco) in {a.jobs} processes")
+    res = capture.capture_all(a.jobs, layout, square, model, rts, rts_sq, a.seed, out, a.keep_images, methods, log,
+                              charuco=True)
     found = {}
     for label, _ in scene.EXPOSURES:
         for g in rts:
-            per = {m: [res[(g, i)].found[label][m][:2] for i in range(npose[g])] for m in methods}
+            per = {m: [res[(g, i)].found[label][m][:2] for i in range(npose[g])] for m in methods + ["charuco"]}
             edir = scene.exposure_dir(out, label)
             for m, vnl in sets.write_group(edir, g, layout, model, rts[g], per, square, rts_sq[g]).items():
                 found.setdefault(label, {}).setdefault(m, {})[g] = vnl

@@ -32,7 +32,7 @@ def test_write_group(tmp_path):
     c = simulate.true_corners(model, layout, rts[0])
     w = np.full(c.shape[:2], 2.0)
     per = {"rotstar": [(c, w), (None, None)], "rotstar-weighted": [(c, w), (None, None)],
-           "saddle": [(c + 0.1, None), (None, None)]}
+           "saddle": [(c + 0.1, None), (None, None)], "charuco": [(c + 0.2, None), (None, None)]}
     vnls = sets.write_group(str(tmp_path), "A", layout, model, rts, per, square, rts)
     assert set(vnls) == set(per)
     with open(vnls["rotstar"]) as f:
@@ -44,6 +44,8 @@ def test_write_group(tmp_path):
         assert f.readline().split()[-1] == "weight"  # the variant carries weights
     with open(vnls["saddle"]) as f:
         assert "pose000/checkerboard.png" in f.read()
+    with open(vnls["charuco"]) as f:
+        assert f.readline().split()[-1] == "level" and "pose000/charuco.png" in f.read()
     for g, lay in (("A", layout), ("A-square", square)):
         seq = os.path.join(tmp_path, g)
         assert dataset.read_pattern(seq)[1].nx == lay.nx

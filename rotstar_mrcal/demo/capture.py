@@ -4,14 +4,18 @@ SYNOPSIS
 
     results = capture_all(jobs, layout, square, model, rts, rts_square, seed, out, keep_images, methods, log)
     results[("A", 0)].found["4000 us"]["saddle"]     # (corners or None, weights or None, why)
+    results[("A", 0)].found["4000 us"]["charuco"]    # OpenCV's ChArUco detector (charuco=True)
     results[("B", 0)].crops                          # close-ups of one corner, per exposure
 
 Per exposure k of pose i of group g, the noise comes from
 default_rng([seed, ord(g), i, k]): one capture of each rotating-star frame,
 then CAPTURES captures of the checkerboard frame and of the square board
-averaged over the screen's part of the image (simulate.captures). The square
-board goes to <exposure>/<g>-square/poseNNN/checkerboard.png as 8 bits, for
-mrgingham; with keep_images every frame is written as a rotstar dataset.
+averaged over the screen's part of the image (simulate.captures), then one
+capture of each identity frame, then (charuco=True) CAPTURES captures of the
+ChArUco board of pattern.charuco averaged (the images before it are those of
+a run without it). The square board goes to
+<exposure>/<g>-square/poseNNN/checkerboard.png as 8 bits, for mrgingham;
+with keep_images every frame of the sequence is written as a rotstar dataset.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ class Job:
     out: str
     keep_images: bool
     methods: tuple  # rotstar_mrcal.methods names that run on the frames of one pose
+    charuco: bool = False  # also OpenCV's ChArUco detector on a ChArUco board at the same pose
 
 
 @dataclasses.dataclass
@@ -50,18 +55,22 @@ class PoseResult:
 _W: dict = {}  # the worker's layouts, model, rays, PSF and screens (init_worker)
 
 
-def init_worker(layout, square, model_args, rays) -> None:
+def init_worker(layout, square, model_args, rays, charuco: bool = False) -> None:
     import cv2
     import mrcal
 
     from .. import simulate
+    from ..pattern.charuco import render_charuco
 
     cv2.setNumThreads(1)
     model = mrcal.cameramodel(intrinsics=model_args[0], imagersize=model_args[1])
     simulate.camera.remember_rays(model, rays)
     cb = [f for f in square.frames() if f["kind"] == "checkerboard"]
+    frames = simulate.exact_frames(layout)  # layout.frames(): rotating-star, identity, checkerboard
+    if charuco:
+        frames = np.concatenate((frames, render_charuco(layout)[None].astype(np.float32)))
     _W.update(layout=layout, square=square, model=model, rays=rays, psf=coma_psf(model.imagersize()),
-              screen=simulate.make_screen(simulate.exact_frames(layout), layout),
+              screen=simulate.make_screen(frames, layout),
               screen_square=simulate.make_screen(simulate.exact_frames(square, cb), square))
 
 
@@ -70,13 +79,17 @@ def capture_pose(job: Job) -> PoseResult:
     import cv2
 
     from .. import dataset, simulate
+    from ..pattern.charuco import detect_charuco
     from ..simulate.captures import averaged_captures, lit_box
     from ..validate.cornersets import detect_methods
 
     t0 = time.perf_counter()
     layout, model = _W["layout"], _W["model"]
     kw = dict(supersample=2, psf=_W["psf"], rays=_W["rays"])
-    E = simulate.render_irradiance(_W["screen"], model, job.rt, **kw)  # 8 rotating-star frames + checkerboard
+    E = simulate.render_irradiance(_W["screen"], model, job.rt, **kw)  # the sequence (+ ChArUco)
+    Ech = E[-1] if job.charuco else None
+    E = E[:-1] if job.charuco else E
+    n = layout.nframes
     Es = simulate.render_irradiance(_W["screen_square"], model, job.rt_square, **kw)[0]
     pose = f"pose{job.index:03d}"
     results, crops = {}, {}
@@ -87,19 +100,24 @@ def capture_pose(job: Job) -> PoseResult:
         def expose(img):
             return simulate.expose(img, gain=gain, noise=NOISE, shot=SHOT, bits=16, rng=rng)
 
-        rot = expose(E[:-1])
+        rot = expose(E[:n])
         cb = averaged_captures(E[-1], expose, CAPTURES, roi=lit_box(E[-1]))
         sq = averaged_captures(Es, expose, CAPTURES, roi=lit_box(Es))
-        found = detect_methods(rot, layout, 65535.0, cb, job.methods)
+        identity = expose(E[n:-1]) if len(E) > n + 1 else None
+        found = detect_methods(rot, layout, 65535.0, cb, job.methods, identity=identity)
         results[label] = {m: (f.corners, f.weights, f.why) for m, f in found.items()}
+        if job.charuco:
+            c = detect_charuco(averaged_captures(Ech, expose, CAPTURES, roi=lit_box(Ech)), layout, 65535.0)
+            ok = np.isfinite(c).all(axis=-1).any()
+            results[label]["charuco"] = (c if ok else None, None, "" if ok else "ChArUco found no corner")
         edir = exposure_dir(job.out, label)
         sqdir = os.path.join(edir, f"{job.group}-square", pose)
         os.makedirs(sqdir, exist_ok=True)
         cv2.imwrite(os.path.join(sqdir, "checkerboard.png"), np.clip(np.round(sq / 257.0), 0, 255).astype(np.uint8))
         if job.keep_images:
+            seq = list(rot) + ([] if identity is None else list(identity)) + [np.round(cb).astype(np.uint16)]
             dataset.write_pose(os.path.join(edir, job.group), pose,
-                               {f["file"]: img for f, img in zip(layout.frames(),
-                                                                 list(rot) + [np.round(cb).astype(np.uint16)])})
+                               {f["file"]: img for f, img in zip(layout.frames(), seq)})
         if job.index == 0:  # close-ups for the report: the corner nearest an image corner
             d = np.linalg.norm(truth - (0, 0), axis=-1)
             j, i = np.unravel_index(np.argmin(d), d.shape)
@@ -110,13 +128,16 @@ def capture_pose(job: Job) -> PoseResult:
 
 
 def capture_all(jobs: int, layout, square, model, rts: dict, rts_square: dict, seed: int, out: str,
-                keep_images: bool, methods, log=None) -> dict:
-    """{(group, index): PoseResult} over every pose of every group, in `jobs` processes"""
+                keep_images: bool, methods, log=None, charuco: bool = False) -> dict:
+    """{(group, index): PoseResult} over every pose of every group, in `jobs` processes
+
+    charuco: also OpenCV's ChArUco detector, found[label]["charuco"].
+    """
     from .. import simulate
 
-    todo = [Job(g, i, rts[g][i], rts_square[g][i], seed, out, keep_images, tuple(methods))
+    todo = [Job(g, i, rts[g][i], rts_square[g][i], seed, out, keep_images, tuple(methods), charuco)
             for g in rts for i in range(len(rts[g]))]
-    init = (layout, square, (model.intrinsics(), model.imagersize()), simulate.camera_rays(model))
+    init = (layout, square, (model.intrinsics(), model.imagersize()), simulate.camera_rays(model), charuco)
     t = time.monotonic()
     out = {}
     try:
@@ -124,7 +145,7 @@ def capture_all(jobs: int, layout, square, model, rts: dict, rts_square: dict, s
             out[(r.group, r.index)] = r
             if log:
                 n_ok = sum(f[0] is not None for e in r.found.values() for f in e.values())
-                log(f"  {r.group} pose{r.index:03d}: {n_ok} of {len(r.found) * len(methods)} boards "
+                log(f"  {r.group} pose{r.index:03d}: {n_ok} of {len(r.found) * (len(methods) + charuco)} boards "
                     f"({r.seconds:.1f} s; {len(out)}/{len(todo)}, {time.monotonic() - t:.0f} s)")
     finally:
         _W.clear()  # with jobs <= 1 the worker state was set up in this process

@@ -7,9 +7,10 @@ SYNOPSIS
     mrg = program_sets(out, {"A": 9, "B": 9}, "mrgingham")    # {(exposure, group): vnl}
 
 edir/<group>/ gets pattern.json, truth.json, truth.cameramodel and one
-<method>.vnl per method; edir/<group>-square/ the same truth for the square
-board (whose images capture.capture_pose wrote), where the square-board
-methods' sets go.
+<method>.vnl per method (and charuco.vnl, OpenCV's ChArUco detector on the
+ChArUco board whose corners are the grid's: its images are poseNNN/charuco.png,
+not written); edir/<group>-square/ the same truth for the square board (whose
+images capture.capture_pose wrote), where the square-board methods' sets go.
 """
 
 from __future__ import annotations
@@ -42,9 +43,10 @@ def write_group(edir, group, layout, model, rts, corners_by_method, square, rts_
     vnls = {}
     seq = os.path.join(edir, group)
     for m, per_pose in corners_by_method.items():
-        first = "rotstar_00.png" if METHODS[m].needs == "rotstar" else "checkerboard.png"
+        first = "charuco.png" if m == "charuco" else "rotstar_00.png" if METHODS[m].needs == "rotstar" \
+            else "checkerboard.png"
         boards = [(f"pose{i:03d}/{first}", c) for i, (c, w) in enumerate(per_pose)]
-        weights = [w for c, w in per_pose] if METHODS[m].variant_of else None
+        weights = [w for c, w in per_pose] if m in METHODS and METHODS[m].variant_of else None
         vnls[m] = os.path.join(seq, f"{m}.vnl")
         with open(vnls[m], "w") as f:
             write_corners(f, boards, weights)
