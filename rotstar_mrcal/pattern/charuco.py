@@ -29,7 +29,7 @@ DICTIONARY (ids 0, 1, ... row by row, as cv2.aruco.CharucoBoard places them),
 centred, of 6 x 6 cells (4 x 4 bits and a black border of one cell), each
 cell an even number of display pixels, the largest with the marker at most
 MARKER_FRACTION of the square: every edge on a pixel boundary, the render
-exact (tests/test_partial.py compares it with OpenCV's generateImage).
+exact (tests/test_partial_bench.py compares it with OpenCV's generateImage).
 OpenCV's chessboard corner id k is corner (i, j) = (k mod nx, k div nx): the
 same numbering as mrcal's records (checked on whole boards by the tests).
 
