@@ -18,9 +18,12 @@ bands black: an element pixel changes between identity frames, a band pixel
 and the screen's surround do not. The *identity map* is each pixel's
 contrast over the identity frames (max - min) over its brightness in all
 frames (floored at a quarter of the image's white, so that dark noise does
-not count), smoothed by 3 x 3; the elements are the connected regions
+not count; not smoothed, which would close the thin bands of small, steep
+elements); the elements are the connected regions
 where it exceeds MAP_THRESHOLD, whether whole or cut by the image edge or an
-occluder. Each element's level in each identity frame is the mean of a
+occluder. A region whose code does not read may be two elements joined
+across a band that blur or saturation closed: it is cut again at the higher
+SPLIT_THRESHOLD, and the parts are read on their own. Each element's level in each identity frame is the mean of a
 5 x 5 lattice of points spread over the largest square inside it, and the
 code (pattern/identity.py) reads its index from those levels or rejects it
 with a reason. Labels never come from the elements' arrangement here; that
@@ -38,6 +41,7 @@ from ..pattern.identity import IdentityCode
 from .boundaries import inscribed_square
 
 MAP_THRESHOLD = 0.7
+SPLIT_THRESHOLD = 0.85  # inside regions whose code is unreadable: the bands closed by blur or saturation
 WHITE_FLOOR = 0.25  # the brightness floor, a fraction of the image's white (99.9th percentile)
 MIN_AREA = 12.0  # px: smaller regions are noise
 SAMPLES = 5  # per side of the lattice of points an element's level is measured on
@@ -73,12 +77,11 @@ def identity_map(rotstar: np.ndarray, identity: np.ndarray) -> np.ndarray:
     for f in rotstar:
         cv2.max(bright, np.asarray(f, np.float32), dst=bright)
     white = float(np.percentile(bright[::4, ::4], 99.9))
-    return cv2.blur((hi - lo) / np.maximum(bright, WHITE_FLOOR * white + 1e-12), (3, 3))
+    return (hi - lo) / np.maximum(bright, WHITE_FLOOR * white + 1e-12)
 
 
-def element_regions(imap: np.ndarray, threshold: float = MAP_THRESHOLD, min_area: float = MIN_AREA):
-    """(mask, contours, centroids, areas, touches_edge) of the regions where imap > threshold"""
-    mask = (imap > threshold).astype(np.uint8)
+def element_regions(mask: np.ndarray, min_area: float = MIN_AREA):
+    """(contours, centroids, areas, touches_edge) of the connected regions of a binary mask"""
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     cs = [c[:, 0, :] for c in contours]
     moments = [cv2.moments(c) for c in cs]
@@ -90,7 +93,7 @@ def element_regions(imap: np.ndarray, threshold: float = MAP_THRESHOLD, min_area
     H, W = mask.shape
     edge = np.array([bool((c[:, 0].min() <= 0) | (c[:, 1].min() <= 0) | (c[:, 0].max() >= W - 1)
                           | (c[:, 1].max() >= H - 1)) for c in cs], bool)
-    return mask, cs, centroids, areas, edge
+    return cs, centroids, areas, edge
 
 
 def element_levels(identity: np.ndarray, centres: np.ndarray, halfsides: np.ndarray) -> np.ndarray:
@@ -110,19 +113,43 @@ def pixel_noise(frames: np.ndarray) -> float:
     return max(float(np.median(np.abs(d - np.median(d)))) * 1.4826 / np.sqrt(2), 0.3)
 
 
+def _read(mask, identity, code, noise):
+    cs, centroids, areas, edge = element_regions(mask)
+    inscribed = np.array([inscribed_square(c, m) for c, m in zip(cs, centroids)]).reshape(-1)
+    if not cs:
+        return cs, centroids, areas, edge, inscribed, np.zeros(0, int), np.zeros(0, object)
+    levels = element_levels(identity, centroids, np.maximum(inscribed, 0.5))
+    index, reason = code.decode(levels, noise=noise)
+    return cs, centroids, areas, edge, inscribed, index, reason
+
+
 def read_identities(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCode) -> Identities:
     """Find the elements in the identity frames and read their codes; see the module doc"""
     identity = np.asarray(identity, np.float32)
     if len(identity) != code.nframes:
         raise ValueError(f"{len(identity)} identity frames; the code has {code.nframes}")
-    mask, cs, centroids, areas, edge = element_regions(identity_map(rotstar, identity))
-    inscribed = np.array([inscribed_square(c, m) for c, m in zip(cs, centroids)]).reshape(-1)
-    levels = element_levels(identity, centroids, np.maximum(inscribed, 0.5))
+    imap = identity_map(rotstar, identity)
+    mask = (imap > MAP_THRESHOLD).astype(np.uint8)
     noise = pixel_noise(identity) / SAMPLES  # of the mean of SAMPLES^2 pixels
-    index, reason = code.decode(levels, noise=noise) if len(cs) else (np.zeros(0, int), np.zeros(0, object))
+    parts = [list(_read(mask, identity, code, noise))]
+    # regions whose code reads as neither: two elements joined across a band closed by blur or
+    # saturation? The band is darker in the map than the elements: split them at SPLIT_THRESHOLD
+    failed = np.flatnonzero(parts[0][5] < 0)
+    if len(failed):
+        inside = np.zeros_like(mask)
+        cv2.drawContours(inside, [parts[0][0][k].reshape(-1, 1, 2) for k in failed], -1, 1, cv2.FILLED)
+        split = list(_read(inside & (imap > SPLIT_THRESHOLD).astype(np.uint8), identity, code, noise))
+        if (split[5] >= 0).any():
+            keep = np.ones(len(parts[0][0]), bool)
+            keep[failed] = False
+            parts = [[[c for c, k in zip(v, keep) if k] if isinstance(v, list) else v[keep] for v in parts[0]],
+                     split]
+    cs = [c for p in parts for c in p[0]]
+    centroids, areas, edge, inscribed, index, reason = (
+        np.concatenate([p[k] for p in parts]) for k in range(1, 7))
     # an index read twice names two places: neither can be trusted
     uniq, counts = np.unique(index[index >= 0], return_counts=True)
     twice = np.isin(index, uniq[counts > 1])
     reason[twice] = "identity read in two places"
     index = np.where(twice, -1, index)
-    return Identities(cs, centroids, areas, edge, index, reason, inscribed, mask)
+    return Identities(cs, centroids.reshape(-1, 2), areas, edge.astype(bool), index, reason, inscribed, mask)

@@ -12,7 +12,10 @@ SYNOPSIS
     result.error        # '' or the one-line reason the board was skipped
 
 The stages (paper 3.2-3.3): response map -> element boundaries -> rough
-corners -> grid indexing and orientation -> refinement, with the checks that
+corners -> grid indexing and orientation -> refinement; with identity frames
+(issue 13) the elements are found and named by their identity codes instead
+of the response map and the element graph (labelled.py: by_identity,
+by_graph), so that boards partly out of view give the corners in view; with the checks that
 name what went wrong: exposure, the border bands' colour frame by frame
 (sequence.py: frames out of order), the element count (too small, hidden,
 out of view), the stars' angles (indexing.frame_angles: order, mirror), and
