@@ -13,7 +13,7 @@ SYNOPSIS
     >>> boards = read_corners(io.StringIO(out.getvalue()), 3, 2)
     >>> boards["seq/a/rotstar_00.png"][1, 2].tolist(), boards["seq/b/rotstar_00.png"]
     ([nan, nan], None)
-    >>> sparse = np.full((9, 14, 2), np.nan); sparse[0, :14] = 1.0    # 14 corners of a 14 x 9 board
+    >>> sparse = np.full((9, 14, 2), np.nan); sparse[0] = 1.0    # 14 corners of a 14 x 9 board
     >>> mrcal_min_corners(14, 9), mrcal_keeps(sparse)
     (18, False)
     >>> write_corners(io.StringIO(), [("seq/c/rotstar_00.png", sparse)])  # written as no board
