@@ -315,6 +315,7 @@ class CaptureResult:
     uncertainty: dict  # measure()
     error: dict
     model: str  # the model file
+    note: str = ""  # what the calibration had to do (validate.calibrate: a board mrcal seeded badly)
 
 
 @dataclasses.dataclass
@@ -364,7 +365,7 @@ def calibrate_capture(seq: str, name: str, files: list[str], boards: list, outdi
                          [os.path.basename(os.path.dirname(s.file)) for s in sparse],
                          [names[i] for i in idx if boards[i] is None], int(len(q)), int(ring.sum()),
                          model.intrinsics()[0], c.stats["rms_px"], c.stats["outliers"], m["uncertainty"],
-                         m["error"], c.model_path)
+                         m["error"], c.model_path, c.candidate(c.chosen).note)
 
 
 def run(work: str, n: int = 20, hanging: int = 8, seed: int = 0, corners: str = "detect", camera: str = "d435",
@@ -446,6 +447,7 @@ def table(r: CoverageResult) -> str:
     notes = [f"{c.name}: {', '.join(c.sparse)} written as no board (too few corners for mrcal)"
              for c in (a, b) if c.sparse]
     notes += [f"{c.name}: {', '.join(c.missing)} gave no board" for c in (a, b) if c.missing]
+    notes += [f"{c.name}: {c.note}" for c in (a, b) if c.note]
     if notes:
         lines += [""] + [f"- {x}" for x in notes]
     return "\n".join(lines)
