@@ -106,6 +106,26 @@ def wait_for_new_view(src: FrameSource, tau: float, fps: float, still_s: float, 
             return True
 
 
+def board_state(corners: np.ndarray) -> str:
+    """'complete', or how many corners are missing and whether mrcal will use the board
+
+    >>> board_state(np.zeros((9, 14, 2)))
+    'complete'
+    >>> c = np.zeros((9, 14, 2)); c[3:] = np.nan
+    >>> board_state(c)
+    '84 corner(s) missing'
+    >>> c[1:] = np.nan; c[1, :4] = 0                       # 18 corners
+    >>> board_state(c)
+    '108 corner(s) missing: too few for mrcal, which ignores boards with <= 18'
+    """
+    ny, nx = corners.shape[:2]
+    n = int(np.isfinite(corners).all(axis=-1).sum())
+    if n == nx * ny:
+        return "complete"
+    return (f"{nx * ny - n} corner(s) missing" + ("" if mrcal_keeps(corners) else
+            f": too few for mrcal, which ignores boards with <= {mrcal_min_corners(nx, ny)}"))
+
+
 def next_free_pose(folders: list[str]) -> int:
     """The first k such that no folder holds pose<k>"""
     k = 0
@@ -190,9 +210,7 @@ def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frame
     motion = display.motion_px.get(pose, r.motion_px)
     entry.update(ok=True, folder=folder, motion_px=motion,
                  display_offsets=None if display.offsets is None else display.offsets.tolist())
-    state = "complete" if r.n_valid == total else f"{total - r.n_valid} corner(s) missing"
-    if not mrcal_keeps(r.corners):
-        state += f": too few for mrcal, which ignores boards with <= {mrcal_min_corners(layout.nx, layout.ny)}"
+    state = board_state(r.corners)
     messages += [f"{ds.what(pose)}: board {state} ({r.n_valid}/{total}), frames agree to {motion:.3f} px beyond "
                  f"the display's offsets; {coverage.describe(counts)}", display.summary()]
     return PoseOutcome(True, messages, folder)
