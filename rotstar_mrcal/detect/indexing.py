@@ -357,14 +357,16 @@ def axis_vectors(grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def bilinear(img: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Bilinear interpolation of img at points p (..., 2), mrcal pixel convention"""
+    """Bilinear interpolation of img at points p (..., 2), mrcal pixel convention; NaN at NaN points"""
     H, W = img.shape
-    x = np.clip(p[..., 0], 0, W - 1.001)
-    y = np.clip(p[..., 1], 0, H - 1.001)
+    nan = ~np.isfinite(p).all(axis=-1)
+    x = np.clip(np.where(nan, 0.0, p[..., 0]), 0, W - 1.001)
+    y = np.clip(np.where(nan, 0.0, p[..., 1]), 0, H - 1.001)
     x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
     fx, fy = x - x0, y - y0
-    return (img[y0, x0] * (1 - fx) * (1 - fy) + img[y0, x0 + 1] * fx * (1 - fy)
-            + img[y0 + 1, x0] * (1 - fx) * fy + img[y0 + 1, x0 + 1] * fx * fy)
+    v = (img[y0, x0] * (1 - fx) * (1 - fy) + img[y0, x0 + 1] * fx * (1 - fy)
+         + img[y0 + 1, x0] * (1 - fx) * fy + img[y0 + 1, x0 + 1] * fx * fy)
+    return np.where(nan, np.nan, v) if nan.any() else v
 
 
 def checker_phase(frame0: np.ndarray, grid: np.ndarray) -> np.ndarray:

@@ -12,7 +12,10 @@ SYNOPSIS
     result.error        # '' or the one-line reason the board was skipped
 
 The stages (paper 3.2-3.3): response map -> element boundaries -> rough
-corners -> grid indexing and orientation -> refinement, with the checks that
+corners -> grid indexing and orientation -> refinement; with identity frames
+(issue 13) the elements are found and named by their identity codes instead
+of the response map and the element graph (labelled.py: by_identity,
+by_graph), so that boards partly out of view give the corners in view; with the checks that
 name what went wrong: exposure, the border bands' colour frame by frame
 (sequence.py: frames out of order), the element count (too small, hidden,
 out of view), the stars' angles (indexing.frame_angles: order, mirror), and
@@ -43,18 +46,11 @@ import numpy as np
 
 from ..methods import refiner
 from ..pattern.layout import Layout
-from .boundaries import element_boundaries
+from .consistency import refined_consistency
 from .display import MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian
-from .indexing import (GridError, contact_graph, frame_angles, grid_array, grid_labels, grid_labels_grown,
-                       mirror_reason, order_reason, orient, prune_triangles)
+from .labelled import MIN_WINDOW, WINDOW_FRACTION, by_graph, by_identity  # noqa: F401 (re-exported)
 from .refine import refine_each_frame, symmetric_refine
-from .response import binarize, response_map
-from .rough import rough_corners
 from .sequence import check_band_parity
-
-LARGE_ELEMENT = 12.0  # px, inscribed half-size above which the curve intersection starts the refinement
-WINDOW_FRACTION = 0.65
-MIN_WINDOW = 2.0
 
 
 @dataclasses.dataclass
@@ -67,6 +63,7 @@ class PoseCorners:
     window: np.ndarray | None = None  # (ny, nx) refinement half-window used
     motion_px: float = 0.0  # frame-to-frame disagreement that display offsets do not explain, px
     shifts: FrameShifts | None = None  # per-frame display offsets of this pose (symmetric refinement)
+    unplaced: list | None = None  # why, for each element seen whose identity was not read
 
     @property
     def found(self) -> bool:
@@ -121,35 +118,6 @@ def check_exposure(frames: np.ndarray, full_scale: float) -> str:
     return ""
 
 
-MIN_SPACING = 12.0  # px between corners below which the elements are not reliably separated
-
-
-def element_count_reason(el, n_expected: int, layout: Layout) -> str:
-    """'' when the element boundaries hold the whole grid, else what was seen
-
-    A border lattice that touches the image edge is fine as long as every
-    element is inside (each element is a hole closed by the lattice).
-    """
-    n = len(el.contours)
-    if n == n_expected:
-        return ""
-    if el.lattice is None or not len(el.lattice):
-        return "no rotating-star pattern found (no border lattice that flips between frames)"
-    seen = f"found {n} elements, expected {layout.nx}x{layout.ny} = {n_expected}"
-    if n > 2 * n_expected:
-        return f"{seen}: the response map is dominated by noise (too dark or too noisy?)"
-    if el.touches_edge:
-        return f"board partly out of view ({n} of {n_expected} elements inside the image)"
-    w, h = np.ptp(el.lattice, axis=0)
-    spacing = float(np.sqrt(w * h / n_expected))  # the lattice spans about nx x ny grid steps
-    if spacing < MIN_SPACING:
-        return (f"{seen}: board too small in the image (corners about {spacing:.0f} px apart, need "
-                f"{MIN_SPACING:.0f}); move closer or show a larger pitch")
-    if n < n_expected:
-        return f"{seen}: part of the board is hidden or blurred (an occluder, glare, or too steep a view?)"
-    return f"{seen}: more elements than the grid of pattern.json (is it the pattern.json of this screen?)"
-
-
 def per_frame_corners(frames: np.ndarray, corners: np.ndarray, window: np.ndarray, ok: np.ndarray,
                       n_corners: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """(indices (n,), corners (nframes, n, 2)): each frame refined alone for n corners spread over the board
@@ -163,6 +131,7 @@ def per_frame_corners(frames: np.ndarray, corners: np.ndarray, window: np.ndarra
     return idx, per
 
 
+MAX_SIGMA_RATIO = 3.0  # a corner's refinement residual over the board's median (whole views: <= 1.3)
 SHIFT_MIN_PX = 0.02  # display offsets below this (camera px) are not modelled in the refinement
 
 
@@ -194,7 +163,12 @@ def detect_pose(
     check_motion: bool = True,
     identity: np.ndarray | None = None,
 ) -> PoseCorners:
-    """Detect and label the corners of one pose; see the module doc"""
+    """Detect and label the corners of one pose; see the module doc
+
+    identity: (nidentity, H, W) the identity frames of a layout that has them;
+    the elements are then labelled by their identities (boards partly out of
+    view give the corners in view), else by the element graph (whole board).
+    """
     frames = np.asarray(frames, np.float32)
     if len(frames) < 2:
         return _fail(layout, f"{len(frames)} rotating-star frame(s); need the whole sequence")
@@ -204,51 +178,31 @@ def detect_pose(
     why = check_band_parity(frames)
     if why:
         return _fail(layout, why)
-    resp = response_map(frames)
-    mask, _ = binarize(resp)
-    el = element_boundaries(mask)
-    n_expected = layout.nx * layout.ny
-    why = element_count_reason(el, n_expected, layout)
-    if why:
-        return _fail(layout, why)
-    # work on the board's bounding box from here on (all stages are local)
+    if identity is not None and layout.identity:
+        identity = np.asarray(identity, np.float32)
+        if identity.shape[1:] != frames.shape[1:] or len(identity) != layout.identity_code.nframes:
+            return _fail(layout, f"identity frames of shape {identity.shape}; expected "
+                                 f"{(layout.identity_code.nframes,) + frames.shape[1:]}")
+        found = by_identity(frames, identity, layout, window)
+    else:
+        found = by_graph(frames, layout, window)
+    if isinstance(found, str):
+        return _fail(layout, found)
+    labels, w = found.labels, found.window
+    # work on the corners' bounding box from here on (all stages are local)
     H, W = frames.shape[1:]
     m = int(np.ceil(window)) + 4
-    x0, y0 = np.maximum(el.lattice.min(axis=0) - m, 0)
-    x1, y1 = np.minimum(el.lattice.max(axis=0) + m + 1, (W, H))
+    x0, y0 = np.maximum(np.floor(found.rough.min(axis=0)).astype(int) - m, 0)
+    x1, y1 = np.minimum(np.ceil(found.rough.max(axis=0)).astype(int) + m + 1, (W, H))
     off = np.array([x0, y0], float)
     frames = frames[:, y0:y1, x0:x1]
-    contours = [c - (x0, y0) for c in el.contours]
-    centroids = el.centroids - off
-    rough = centroids.copy()
-    large = el.inscribed >= LARGE_ELEMENT
-    if large.any():
-        q, ok = rough_corners(frames, [c for c, l in zip(contours, large) if l], centroids[large])
-        rough[np.flatnonzero(large)[ok]] = q[ok]
-    A, contact = contact_graph(contours, frames.shape[1:], el.lattice - (x0, y0))
-    try:
-        try:
-            labels = grid_labels(prune_triangles(A, contact), layout.nx, layout.ny)
-        except GridError as e:  # small elements: diagonal neighbours touch like side ones
-            try:
-                labels = grid_labels_grown(A, centroids, layout.nx, layout.ny)
-            except GridError:
-                raise e from None
-        hef = layout.half_element / layout.pitch
-        why = order_reason(frame_angles(frames, grid_array(labels, rough, layout.nx, layout.ny), hef), layout.step)
-        if why:
-            return _fail(layout, why)
-        labels = orient(labels, rough, frames[0], layout.nx, layout.ny, layout.marker)
-    except GridError as e:
-        return _fail(layout, str(e))
-    why = mirror_reason(frame_angles(frames, grid_array(labels, rough, layout.nx, layout.ny), hef), layout.step)
-    if why:
-        return _fail(layout, why)
+    rough = found.rough - off
 
-    w = np.clip(WINDOW_FRACTION * el.inscribed, MIN_WINDOW, window)
     grid_w = np.full((layout.ny, layout.nx), np.nan)
     grid_w[labels[:, 1], labels[:, 0]] = w
     reasons = np.full((layout.ny, layout.nx), "", dtype=object)
+    for (i, j), r in found.rejected.items():
+        reasons[j, i] = r
     sigma = np.full((layout.ny, layout.nx), np.nan)
     cov = np.full((layout.ny, layout.nx, 2, 2), np.nan)
     motion = 0.0
@@ -278,6 +232,20 @@ def detect_pose(
     else:
         raise ValueError(f"refiner {refine!r} has no place in detect_pose")
 
+    if found.by_identity:  # corners of partial views: checked against the others and against their neighbours
+        q = q.copy()
+        good = np.isfinite(q).all(axis=1)
+        if refine == "symmetric" and good.sum() >= 4:
+            ratio = res.sigma / np.median(res.sigma[good])
+            odd = good & ~(ratio <= MAX_SIGMA_RATIO)
+            reasons[labels[odd, 1], labels[odd, 0]] = [
+                f"refinement residual {v:.0f} x the board's median (partly hidden, or glare?)" for v in ratio[odd]]
+            q[odd] = np.nan
+            good &= ~odd
+        ok2, why = refined_consistency(labels[good], q[good])
+        drop = np.flatnonzero(good)[~ok2]
+        reasons[labels[drop, 1], labels[drop, 0]] = why[~ok2]
+        q[drop] = np.nan
     corners = np.full((layout.ny, layout.nx, 2), np.nan)
     corners[labels[:, 1], labels[:, 0]] = q + off
-    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts)
+    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced)
