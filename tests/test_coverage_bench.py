@@ -121,6 +121,10 @@ def test_machinery_table_says_it_is_no_result(machinery):
     assert "| boards mrcal used (hanging) | 10 (0) | 10 (4) |  |" in t
     ok, line = cb.verdict(r)
     assert line.startswith("uncertainty at the imager corners") and ("NOT" in line) != ok
+    assert "over 2 captures" in cb.verdict([r, r])[1]
+    rows = cb.seeds_table([r, r]).splitlines()
+    u = r.ratios()["uncertainty"]
+    assert len(rows) == 4 and rows[2] == rows[3] and f"| {u['corners_mean']:.1f}x | {min(u['corners']):.1f}x |" in rows[2]
     fn = cb.figure(r, str(work / "fig.png"))
     assert os.path.getsize(fn) > 10_000
 
@@ -129,7 +133,7 @@ def test_doc_refused_for_the_machinery_check(tmp_path):
     doc = os.path.join(ROOT, "doc", "uncertainty.md")
     before = open(doc).read()
     r = subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "coverage_bench.py"), "--corners", "truth+noise",
-                        "--poses", "6", "--hanging", "2", "--work", str(tmp_path), "--doc"],
+                        "--poses", "6", "--hanging", "2", "--seeds", "0", "--work", str(tmp_path), "--doc"],
                        capture_output=True, text=True)
     assert r.returncode == 1 and "--doc refused: truth+noise" in r.stderr, r.stderr
     assert r.stdout.startswith(cb.MACHINERY_NOTE)
@@ -143,8 +147,7 @@ def test_detected_on_a_small_camera(tmp_path):
                lensmodel="LENSMODEL_PINHOLE", settings=Settings(bits=16, seed=0), jobs=2)
     a, b = r.captures["whole"], r.captures["edges"]
     assert a.boards == 6 and not a.missing and not a.sparse  # whole boards: all detected
-    lost = [p for p in b.missing + b.sparse if p in ("pose006", "pose007")]
-    assert b.hanging_used + len(lost) == 2  # each hanging pose: used, too sparse for mrcal, or no board
+    assert not b.missing and b.hanging_used + len(b.sparse) == 2  # each hanging pose: a board (maybe too few corners)
     assert b.boards == 4 + b.hanging_used
     assert np.isfinite(b.uncertainty["corners_mean"]) and a.error["centre_median"] < 0.1
     assert "MACHINERY" not in cb.table(r)

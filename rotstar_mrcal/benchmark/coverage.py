@@ -453,11 +453,28 @@ def table(r: CoverageResult) -> str:
     return "\n".join(lines)
 
 
-def verdict(r: CoverageResult, factor: float = 2.0) -> tuple[bool, str]:
-    """(is the uncertainty at every imager corner at least factor x lower with hanging boards, one line)"""
-    q = r.ratios()["uncertainty"]["corners"]
+def seeds_table(results: list[CoverageResult]) -> str:
+    """The ratios (whole / with edges) of runs with other poses (seeds), one row each"""
+    lines = ["| seed | boards mrcal used (hanging), with edges | uncertainty ratio: 4 corners, mean | worst corner | "
+             "outer 10 %, RMS | error ratio: 4 corners, mean | outer 10 %, RMS |", "|---|---|---|---|---|---|---|"]
+    for r in results:
+        q, b = r.ratios(), r.captures["edges"]
+        u, e = q["uncertainty"], q["error"]
+        lines.append(f"| {r.seed} | {b.boards} ({b.hanging_used}) | {u['corners_mean']:.1f}x | {min(u['corners']):.1f}x | "
+                     f"{u['ring_rms']:.1f}x | {e['corners_mean']:.1f}x | {e['ring_rms']:.1f}x |")
+    return "\n".join(lines)
+
+
+def verdict(results, factor: float = 2.0) -> tuple[bool, str]:
+    """(is the uncertainty at every imager corner at least factor x lower with hanging boards, one line)
+
+    results: one CoverageResult or a list of them (seeds): every corner of every run.
+    """
+    results = [results] if isinstance(results, CoverageResult) else list(results)
+    q = [v for r in results for v in r.ratios()["uncertainty"]["corners"]]
     ok = min(q) >= factor
-    return ok, (f"uncertainty at the imager corners {min(q):.1f}-{max(q):.1f}x lower with boards over the edges "
+    runs = f" over {len(results)} captures" if len(results) > 1 else ""
+    return ok, (f"uncertainty at the imager corners {min(q):.1f}-{max(q):.1f}x lower with boards over the edges{runs} "
                 f"({'at least' if ok else 'NOT at least'} {factor:g}x at every corner)")
 
 
