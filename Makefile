@@ -28,13 +28,14 @@ ifeq ($(UV),)
 UV := $(CURDIR)/.tools/bin/uv
 endif
 
-.PHONY: help setup test demo bench calib-bench pip-check clean check-python system-deps
+.PHONY: help setup test demo bench calib-bench coverage-bench pip-check clean check-python system-deps
 
 help:
 	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
 	@echo "make test   - run the test suite (all set-up included)"
-	@echo "make bench  - accuracy and speed benchmark against OpenCV and mrgingham, and calib-bench"
+	@echo "make bench  - accuracy and speed benchmark against OpenCV and mrgingham, then calib-bench and coverage-bench"
 	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses)"
+	@echo "make coverage-bench - mrcal's uncertainty with and without boards hanging over the imager's edges"
 	@echo "make pip-check   - install with plain pip (scripts/pip_install.sh) into a fresh venv and check it"
 
 check-python:
@@ -75,13 +76,18 @@ demo: setup
 bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/bench.py $(BENCH_ARGS)
 	$(MAKE) calib-bench
+	$(MAKE) coverage-bench
 
 # writes its table into doc/validation.md (between the calib-bench markers)
 calib-bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/calib_bench.py --work calib-bench-out --doc
 
+# writes its table into doc/uncertainty.md (between the coverage-bench markers) and doc/img/coverage/
+coverage-bench: setup
+	$(RUN) $(VENV_BIN)/python scripts/coverage_bench.py --work coverage-bench-out --doc
+
 pip-check: check-python
 	PYTHON=$(PYTHON) $(VENV_BIN)/python -m pytest -q -s -m slow tests/test_pip_install.py
 
 clean:
-	rm -rf .venv .tools $(DEMO_DIR) .pytest_cache calib-bench-out
+	rm -rf .venv .tools $(DEMO_DIR) .pytest_cache calib-bench-out coverage-bench-out

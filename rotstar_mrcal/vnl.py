@@ -3,15 +3,21 @@
 SYNOPSIS
 
     >>> import io, numpy as np
-    >>> from rotstar_mrcal.vnl import write_corners, read_corners
+    >>> from rotstar_mrcal.vnl import write_corners, read_corners, mrcal_keeps, mrcal_min_corners
     >>> grid = np.arange(12.0).reshape(2, 3, 2); grid[1, 2] = np.nan
     >>> out = io.StringIO()
     >>> write_corners(out, [("seq/a/rotstar_00.png", grid), ("seq/b/rotstar_00.png", None)])
+    []
     >>> print(out.getvalue().splitlines()[1:3], out.getvalue().splitlines()[-1])
     ['seq/a/rotstar_00.png 0.000000 1.000000 0.5', 'seq/a/rotstar_00.png 2.000000 3.000000 0.5'] seq/b/rotstar_00.png - - -
     >>> boards = read_corners(io.StringIO(out.getvalue()), 3, 2)
     >>> boards["seq/a/rotstar_00.png"][1, 2].tolist(), boards["seq/b/rotstar_00.png"]
     ([nan, nan], None)
+    >>> sparse = np.full((9, 14, 2), np.nan); sparse[0] = 1.0    # 14 corners of a 14 x 9 board
+    >>> mrcal_min_corners(14, 9), mrcal_keeps(sparse)
+    (18, False)
+    >>> write_corners(io.StringIO(), [("seq/c/rotstar_00.png", sparse)])  # written as no board
+    [SparseBoard(file='seq/c/rotstar_00.png', corners=14, limit=18)]
 
 The rules (mrcal 2.5, checked against mrcal.compute_chessboard_corners): a
 header line `# filename x y level` (or `weight`), then per image either
@@ -22,6 +28,15 @@ use mrcal's convention (centre of the top-left pixel = (0, 0)). Filenames must
 be ASCII without whitespace. With weights (mrcal's
 --corners-cache-has-weights) the fourth column is a weight proportional to
 1/sigma; otherwise it is `level` LEVEL = 0.5 on every corner.
+
+mrcal's row rule: a board with at most 2 * min(nx, ny) valid corners is
+dropped without a word by mrcal-calibrate-cameras (18 for the default 14 x 9
+board). write_corners writes such a board as one `filename - - -` row, the
+way mrcal treats it, and returns it (a SparseBoard) so that the tool that
+wrote the file can say so: the boards a user is told about are the boards
+mrcal uses. Valid is mrcal's own test: x and y given and >= 0 (a negative
+coordinate is "missing" to mrcal) and, with weights, a weight > 0
+(mrcal_valid). mrcal_keeps reads it on a file's boards.
 
 Why 0.5 and not 0. mrcal's tools disagree about the fourth column of a
 `# filename x y level` file: mrcal-calibrate-cameras (and
@@ -45,6 +60,8 @@ check), as it refuses any weighted file.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 LEVEL = "0.5"
@@ -62,28 +79,78 @@ def _check_name(fn: str) -> str:
     return fn
 
 
-def write_corners(stream, boards, weights=None, precision: int = 6) -> None:
-    """Write [(filename, (ny, nx, 2) array or None), ...] as corners.vnl
+@dataclasses.dataclass(frozen=True)
+class SparseBoard:
+    """A board mrcal would drop: written as no board (write_corners)"""
+
+    file: str
+    corners: int  # its valid corners
+    limit: int  # mrcal keeps a board only with more than this many
+
+
+def mrcal_min_corners(nx: int, ny: int) -> int:
+    """mrcal keeps a board only if it has MORE valid corners than this: 2 * min(nx, ny)
+
+    mrcal 2.5.2, mrcal/calibration.py, compute_chessboard_corners (which
+    mrcal-calibrate-cameras calls without Npoint_observations_per_board_min):
+    l.191-192 `Npoint_observations_per_board_min = 2*min(W,H)`, and l.326-327
+    keeps a board only if `context['Nvalidpoints'] >
+    Npoint_observations_per_board_min` (its docstring says "fewer than",
+    the code drops equality too). W, H: --object-width-n, --object-height-n.
+    """
+    return 2 * min(int(nx), int(ny))
+
+
+def mrcal_valid(grid, weights=None) -> np.ndarray:
+    """(ny, nx) bool: the corners mrcal counts as observed
+
+    mrcal/calibration.py parse_point (l.376-413): x and y not '-' and both
+    >= 0; with a weight column, a weight > 0. NaN is how we write '-'.
+    """
+    xy = np.asarray(grid, float)
+    ok = np.isfinite(xy).all(axis=-1) & (np.nan_to_num(xy, nan=-1.0) >= 0).all(axis=-1)
+    if weights is not None:
+        w = np.asarray(weights, float)
+        ok &= np.isfinite(w) & (np.nan_to_num(w, nan=0.0) > 0)
+    return ok
+
+
+def mrcal_keeps(grid, weights=None) -> bool:
+    """Does mrcal use this (ny, nx, 2) board (more than mrcal_min_corners valid corners)?"""
+    if grid is None:
+        return False
+    ny, nx = np.shape(grid)[:2]
+    return int(mrcal_valid(grid, weights).sum()) > mrcal_min_corners(nx, ny)
+
+
+def write_corners(stream, boards, weights=None, precision: int = 6) -> list[SparseBoard]:
+    """Write [(filename, (ny, nx, 2) array or None), ...] as corners.vnl; returns the boards written as none
 
     weights: optional list parallel to boards of (ny, nx) arrays (> 0) for the
-    fourth column; NaN or <= 0 weights mark the corner missing.
+    fourth column; NaN or <= 0 weights mark the corner missing. A board that
+    mrcal would drop (mrcal_keeps) is written as one `filename - - -` row and
+    returned as a SparseBoard, for the caller to say so.
     """
     stream.write("# filename x y " + ("weight" if weights is not None else "level") + "\n")
+    sparse = []
     for b, (fn, grid) in enumerate(boards):
         fn = _check_name(fn)
         if grid is None:
             stream.write(f"{fn} - - -\n")
             continue
+        wt = None if weights is None else np.asarray(weights[b], float)
+        valid = mrcal_valid(grid, wt)
+        ny, nx = valid.shape
+        if not mrcal_keeps(grid, wt):
+            sparse.append(SparseBoard(fn, int(valid.sum()), mrcal_min_corners(nx, ny)))
+            stream.write(f"{fn} - - -\n")
+            continue
         xy = np.asarray(grid, float).reshape(-1, 2)
-        if weights is not None:
-            wt = np.asarray(weights[b], float).ravel()
-            valid = np.isfinite(xy).all(axis=1) & np.isfinite(wt) & (wt > 0)
-            fourth = [f"{v:.6g}" for v in np.where(valid, wt, 0)]
-        else:
-            valid = np.isfinite(xy).all(axis=1)
-            fourth = [str(LEVEL)] * len(xy)
+        valid = valid.ravel()
+        fourth = [f"{v:.6g}" for v in np.where(valid, wt.ravel(), 0)] if wt is not None else [LEVEL] * len(xy)
         for (x, y), ok, f4 in zip(xy, valid, fourth):
             stream.write(f"{fn} {x:.{precision}f} {y:.{precision}f} {f4}\n" if ok else f"{fn} - - -\n")
+    return sparse
 
 
 def read_corners(stream, nx: int, ny: int) -> dict:

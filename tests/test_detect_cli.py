@@ -470,3 +470,29 @@ def test_weights_column(good_seq, d435_seq, run_cli, tmp_path):
     assert np.allclose(obs[..., 2].ravel(), w, rtol=1e-5)
     for o, pose in zip(obs, sorted(truth)):
         assert np.allclose(o[..., :2], truth[pose], atol=0.05)
+
+
+def test_board_with_too_few_corners_for_mrcal(run_cli, tmp_path):
+    """A board hanging far out of view (identity frames): its few corners are written as no board, and said"""
+    from rotstar_mrcal.benchmark.coverage import plan_captures
+    from rotstar_mrcal.pattern.layout import make_layout
+    from rotstar_mrcal.simulate import Settings, preset_model
+
+    model, layout = preset_model("pinhole-small"), make_layout(screen=(800, 600), pitch=100, band=24)
+    plan = plan_captures(model, layout, n=6, hanging=2, seed=0)
+    seq = str(tmp_path / "seq")
+    write_dataset(seq, layout, model, plan.rts[[0, 1, 2, 6]], Settings(bits=16, seed=0), jobs=2)
+    r = run_cli("rotstar-detect", seq, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    limit = 2 * min(layout.nx, layout.ny)
+    line, = [x for x in r.stderr.splitlines() if x.startswith("pose003: ")]
+    n = int(re.match(r"pose003: (\d+) corners, mrcal ignores boards with <= (\d+); written as no board$", line)[1])
+    assert 0 < n <= limit and f"<= {limit};" in line  # the hanging board gave corners, too few for mrcal
+    assert "rotstar-detect: 3 of 4 poses gave a board (1 more gave too few corners for mrcal: written as no " \
+           "board)" in r.stderr
+    assert [x for x in r.stdout.splitlines() if x.startswith(f"{seq}/pose003/")] == [f"{seq}/pose003/{FIRST} - - -"]
+    fn = tmp_path / "corners.vnl"
+    fn.write_text(r.stdout)
+    _, _, paths = mrcal.compute_chessboard_corners(layout.nx, layout.ny, globs_per_camera=(os.path.join(seq, "*", FIRST),),
+                                                   corners_cache_vnl=str(fn), weight_column_kind="level")
+    assert len(paths) == 3  # what rotstar-detect said: mrcal uses three boards

@@ -113,13 +113,15 @@ def write_segmented(seq: str, pose: str, seg: Segmentation, pattern: dict, full_
 
 
 def quick_check(seg: Segmentation, layout: Layout, pattern: dict, full_scale: float) -> PoseCorners:
-    """detect_pose on the segmented averages
+    """detect_pose on the segmented averages (with the identity frames, which label a partial board)
 
     full_scale: of the averages as they are, in recorded units (before
     encode_average's scaling): the recording's full scale / value_scale.
     """
     rot = [f["file"] for f in pattern["frames"] if f["kind"] == "rotstar"]
     cb = [f["file"] for f in pattern["frames"] if f["kind"] == "checkerboard"]
+    ids = [f["file"] for f in pattern["frames"] if f["kind"] == "identity"]
     frames = np.stack([seg.images[f] for f in rot]).astype(np.float32)
     checker = seg.images[cb[0]].astype(np.float32) if cb else None
-    return detect_pose(frames, layout, full_scale=full_scale, checkerboard=checker)
+    identity = np.stack([seg.images[f] for f in ids]).astype(np.float32) if ids else None
+    return detect_pose(frames, layout, full_scale=full_scale, checkerboard=checker, identity=identity)

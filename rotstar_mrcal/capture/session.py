@@ -29,6 +29,7 @@ import numpy as np
 
 from ..atomic import atomic_path
 from ..detect.display import DisplayCheck, dataset_offsets
+from ..vnl import mrcal_keeps, mrcal_min_corners
 from . import coverage
 from .motion import difference_signal, downsample, is_still
 from .pose import quick_check, value_scale, write_segmented
@@ -57,6 +58,7 @@ class OutputDataset:
     def __init__(self, folder: str, exposure: int | None):
         self.folder, self.exposure = folder, exposure
         self.boards: list[np.ndarray] = []
+        self.names: list[str] = []  # the pose of each board
         self.shifts: dict = {}  # pose -> FrameShifts
         self.imagersize = None
         self.scale: float | None = None
@@ -102,6 +104,26 @@ def wait_for_new_view(src: FrameSource, tau: float, fps: float, still_s: float, 
             moved = True
         elif moved and is_still(d, tau, 0.75):
             return True
+
+
+def board_state(corners: np.ndarray) -> str:
+    """'complete', or how many corners are missing and whether mrcal will use the board
+
+    >>> board_state(np.zeros((9, 14, 2)))
+    'complete'
+    >>> c = np.zeros((9, 14, 2)); c[3:] = np.nan
+    >>> board_state(c)
+    '84 corner(s) missing'
+    >>> c[1:] = np.nan; c[1, :4] = 0                       # 18 corners
+    >>> board_state(c)
+    '108 corner(s) missing: too few for mrcal, which ignores boards with <= 18'
+    """
+    ny, nx = corners.shape[:2]
+    n = int(np.isfinite(corners).all(axis=-1).sum())
+    if n == nx * ny:
+        return "complete"
+    return (f"{nx * ny - n} corner(s) missing" + ("" if mrcal_keeps(corners) else
+            f": too few for mrcal, which ignores boards with <= {mrcal_min_corners(nx, ny)}"))
 
 
 def next_free_pose(folders: list[str]) -> int:
@@ -177,17 +199,18 @@ def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frame
                              {"exposure_us": ds.exposure, "dropped_camera_frames": entry["dropped"],
                               "quick_check": {"corners": r.n_valid, "motion_px": r.motion_px}})
     ds.boards.append(r.corners)
+    ds.names.append(pose)
     ds.imagersize = (frames.shape[2], frames.shape[1])
     counts = coverage.coverage_counts(ds.boards, ds.imagersize)
     with atomic_path(os.path.join(ds.folder, "coverage.png")) as tmp:
-        cv2.imwrite(tmp, coverage.coverage_image(ds.boards, ds.imagersize))
+        cv2.imwrite(tmp, coverage.coverage_image(ds.boards, ds.imagersize, names=ds.names))
     if r.shifts is not None:
         ds.shifts[pose] = r.shifts
     display = ds.display
     motion = display.motion_px.get(pose, r.motion_px)
     entry.update(ok=True, folder=folder, motion_px=motion,
                  display_offsets=None if display.offsets is None else display.offsets.tolist())
-    state = "complete" if r.n_valid == total else f"{total - r.n_valid} corner(s) missing"
+    state = board_state(r.corners)
     messages += [f"{ds.what(pose)}: board {state} ({r.n_valid}/{total}), frames agree to {motion:.3f} px beyond "
                  f"the display's offsets; {coverage.describe(counts)}", display.summary()]
     return PoseOutcome(True, messages, folder)

@@ -86,6 +86,26 @@ def corners_name(output) -> tuple[str, bool]:
     return "corners.vnl", False
 
 
+def sparse_line(pose: str, s) -> str:
+    """The stderr line for a board written as none (vnl.SparseBoard)
+
+    >>> from rotstar_mrcal.vnl import SparseBoard
+    >>> sparse_line("pose007", SparseBoard("seq/pose007/rotstar_00.png", 14, 18))
+    'pose007: 14 corners, mrcal ignores boards with <= 18; written as no board'
+    """
+    return f"{pose}: {s.corners} corners, mrcal ignores boards with <= {s.limit}; written as no board"
+
+
+def summary_line(boards: int, poses: int, sparse: int) -> str:
+    """The closing count: the boards mrcal will use
+
+    >>> summary_line(11, 12, 1)
+    'rotstar-detect: 11 of 12 poses gave a board (1 more gave too few corners for mrcal: written as no board)'
+    """
+    return (f"rotstar-detect: {boards} of {poses} poses gave a board"
+            + (f" ({sparse} more gave too few corners for mrcal: written as no board)" if sparse else ""))
+
+
 def main(argv=None) -> int:
     return run("rotstar-detect", _main, argv)
 
@@ -128,11 +148,15 @@ def _main(argv=None) -> int:
     weights = det.weights() if a.weights else None
     if a.output:
         with atomic_write(a.output) as out:
-            write_corners(out, det.boards(), weights)
+            sparse = write_corners(out, det.boards(), weights)
     else:
-        write_corners(sys.stdout, det.boards(), weights)
-    found = [r.corners.corners for r in det.found]
-    say(f"rotstar-detect: {len(found)} of {len(det.results) + len(unmatched)} poses gave a board")
+        sparse = write_corners(sys.stdout, det.boards(), weights)
+    dropped = {s.file for s in sparse}
+    pose_of = {r.file: r.pose for r in det.results}
+    for s in sparse:
+        say(sparse_line(pose_of.get(s.file, s.file), s))
+    found = [r.corners.corners for r in det.found if r.file not in dropped]
+    say(summary_line(len(found), len(det.results) + len(unmatched), len(sparse)))
     if not found:
         return EXIT_FAILED
     sizes = det.sizes

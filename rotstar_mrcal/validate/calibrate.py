@@ -41,7 +41,25 @@ data can constrain it, and to compare them. The default ('auto') here:
 
 Checks on the model written (Calibration.failures; rotstar-calibrate exits 1
 unless --keep): mrcal rejected more than MAX_OUTLIER_FRACTION of the corners
-as outliers, or the valid-intrinsics region is empty. Inputs that cannot
+as outliers, or most of the corners of one board (MOSTLY_OUTLIERS), or the
+valid-intrinsics region is empty.
+
+A board mrcal seeds badly. mrcal-calibrate-cameras seeds every board's pose
+from a stereographic core without distortion and rejects outliers from the
+first full solve on. A board far into an image corner, close and tilted (a
+board hanging over the edge, which the identity frames make possible) can
+be seeded so far off that mrcal rejects most of its corners, leaving a few
+in a line: a board pose the data no longer pins down, which makes the
+projection uncertainty explode (measured on a simulated 20-pose capture: 37
+of 42 corners of one such board rejected, the uncertainty at the imager
+corners 5000 px instead of 0.05). Short of that, which corners of such
+boards mrcal rejects depends on the random start it gives the distortion
+terms (measured: 0, 5 or 8 good corners of the same 20 boards over eight
+starts). So whenever mrcal rejected corners, calibrate() solves again,
+seeded from the model of the first solve (mrcal-calibrate-cameras --seed
+instead of --focal: every board's pose then starts from a model with
+distortion, and no term starts at random), and keeps that solve if it
+rejects fewer corners; real outliers are rejected by both. Inputs that cannot
 give a model raise InputError before mrcal runs (check_inputs): fewer than
 MIN_BOARDS boards, images of different sizes, a focal seed that the boards
 do not agree on.
@@ -103,6 +121,9 @@ MIN_BOARDS = 4
 
 MAX_OUTLIER_FRACTION = 0.02
 """A calibration that rejects more of its corners than this fails its checks"""
+
+MOSTLY_OUTLIERS = 0.5
+"""A board of which mrcal rejected more than this fraction of its corners was seeded badly (module doc)"""
 
 VALID_REGION_PARAMETERS = (5, 0.05, 2, 3, 0)
 """mrcal-calibrate-cameras --valid-intrinsics-region-parameters for sub-0.05 px corners (module doc)"""
@@ -504,6 +525,9 @@ def model_stats(model: mrcal.cameramodel, cs=None) -> dict:
         given = np.ones(obs.shape[:3], bool)
     outlier = given & (obs[..., 2] <= 0)
     where = np.bincount(region_of(obs[..., :2][outlier], (W, H)), minlength=9)
+    lost, had = outlier.sum(axis=(1, 2)), given.sum(axis=(1, 2))
+    mostly = {(paths[b] if len(paths) == obs.shape[0] else str(b)): [int(lost[b]), int(had[b])]
+              for b in np.flatnonzero(lost > MOSTLY_OUTLIERS * had)} if cs is not None else {}
     stats = {
         "lensmodel": lens,
         "boards": int(obs.shape[0]),
@@ -511,6 +535,7 @@ def model_stats(model: mrcal.cameramodel, cs=None) -> dict:
         "outliers": int(outlier.sum()),
         "outlier_fraction": float(outlier.sum() / max(1, given.sum())),
         "outliers_where": {r: int(c) for r, c in zip(REGIONS, where) if c},
+        "boards_mostly_outliers": mostly,  # pose -> [corners rejected, corners given]
         "rms_px": float(np.sqrt(np.mean(e[ok] ** 2))) if ok.any() else float("nan"),
         "worst_px": float(np.max(e[ok])) if ok.any() else float("nan"),
         "sigma_px": float(np.std(mrcal.measurements_board(oi))),
@@ -555,6 +580,37 @@ def stats_line(s: dict) -> str:
             + ("not computed" if vr is None else f"{100 * vr:.0f}% of the imager"))
 
 
+def mostly_line(mostly: dict) -> str:
+    """'pose022 (37 of 42)' for model_stats' boards_mostly_outliers
+
+    >>> mostly_line({"pose022": [37, 42], "pose025": [30, 40]})
+    'pose022 (37 of 42), pose025 (30 of 40)'
+    """
+    return ", ".join(f"{k} ({a} of {b})" for k, (a, b) in mostly.items())
+
+
+def reseeded_argv(argv, seed_model: str, outdir: str) -> list[str]:
+    """A calibrate_argv command seeded from a model (--seed, which excludes --focal), writing into outdir
+
+    >>> reseeded_argv(["mrcal-calibrate-cameras", "--focal", "640", "--outdir", "a", "x"], "a/m.cameramodel", "b")
+    ['mrcal-calibrate-cameras', '--seed', 'a/m.cameramodel', '--outdir', 'b', 'x']
+    """
+    argv = [str(a) for a in argv]
+    out = []
+    i = 0
+    while i < len(argv):
+        if argv[i] == "--focal":
+            out += ["--seed", seed_model]
+            i += 2
+        elif argv[i] == "--outdir":
+            out += ["--outdir", outdir]
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
 def model_failures(s: dict) -> list[str]:
     """The checks a written model must pass; one reason per failure"""
     out = []
@@ -562,6 +618,9 @@ def model_failures(s: dict) -> list[str]:
         out.append(f"mrcal rejected {s['outliers']} of the corners as outliers ({100 * s['outlier_fraction']:.1f}% > "
                    f"{100 * MAX_OUTLIER_FRACTION:.0f}%; where: "
                    + ", ".join(f"{k} {v}" for k, v in s["outliers_where"].items()) + ")")
+    if s.get("boards_mostly_outliers"):
+        out.append("mrcal rejected most corners of " + mostly_line(s["boards_mostly_outliers"])
+                   + ": those boards' poses are barely constrained")
     if s.get("valid_region_fraction") == 0.0:
         out.append("the valid-intrinsics region is empty (no part of the imager is both seen and well "
                    "constrained)")
@@ -578,6 +637,7 @@ class Candidate:
     path: str  # the model file mrcal wrote (under outdir/candidates/)
     stats: dict | None = None
     error: str | None = None  # mrcal failed
+    note: str = ""  # e.g. why it was solved again, seeded from its first solve
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -622,7 +682,8 @@ class Calibration:
         for c in self.candidates:
             mark = "written" if c.name == self.chosen and self.model_path else (
                 "chosen" if c.name == self.chosen else "not written")
-            out.append(f"{c.name} ({mark}): " + (stats_line(c.stats) if c.stats else f"failed: {c.error}"))
+            out.append(f"{c.name} ({mark}): " + (stats_line(c.stats) if c.stats else f"failed: {c.error}")
+                       + (f" [{c.note}]" if c.note else ""))
         if self.comparison:
             k = self.comparison
             out.append(f"lean vs splined: projection diff {k['diff_median_px']:.4f} px median (p95 "
@@ -635,6 +696,32 @@ class Calibration:
 def _atomic_copy(src: str, dst: str) -> None:
     with atomic_path(dst) as tmp:
         shutil.copyfile(src, tmp)
+
+
+def _reseed(c: Candidate, argv, cs, in_process: bool, log) -> None:
+    """Solve c again seeded from its first solve (module doc: a board mrcal seeds badly); keep the better one"""
+    mostly = c.stats["boards_mostly_outliers"]
+    first = ("most corners of " + mostly_line(mostly)) if mostly else f"{c.stats['outliers']} corner(s) as outliers"
+    seeded = os.path.join(os.path.dirname(os.path.dirname(c.path)), os.path.basename(os.path.dirname(c.path))
+                          + "-seeded")
+    argv2 = reseeded_argv(argv, c.path, seeded)
+    log(f"mrcal rejected {first}: solving again seeded from that model")
+    log("$ " + command_line(argv2))
+    stale = os.path.join(seeded, "camera-0.cameramodel")
+    if os.path.exists(stale):
+        os.remove(stale)
+    try:
+        model = run_calibration(argv2, in_process=in_process)
+    except CalibrationError as e:
+        c.note = f"mrcal rejected {first}; the seeded solve failed: {str(e).splitlines()[0]}"
+        return
+    s2 = model_stats(model, cs)
+    if s2["outliers"] < c.stats["outliers"]:
+        c.note = (f"solved again seeded from its first solve, in which mrcal rejected {first} "
+                  f"({c.stats['outliers']} outliers then, {s2['outliers']} now)")
+        c.path, c.command, c.stats = stale, command_line(argv2), s2
+    else:
+        c.note = f"mrcal rejected {first}, also when seeded from its first solve"
 
 
 def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, knots_x: int = DEFAULT_KNOTS_X,
@@ -654,7 +741,8 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
     log = log or (lambda s: None)
     final = os.path.join(outdir, "camera-0.cameramodel")
     for stale in [final] + [os.path.join(outdir, "candidates", n, "camera-0.cameramodel")
-                                            for n in ("lean", "splined", "model")]:
+                                            for n in ("lean", "splined", "model", "lean-seeded", "splined-seeded",
+                                                      "model-seeded")]:
         if os.path.exists(stale):
             os.remove(stale)
     check_inputs(cs)  # the boards and the image sizes first: they decide whether anything can be done
@@ -680,6 +768,8 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
                 os.remove(c.path)
             model = run_calibration(argv, in_process=in_process)
             c.stats = model_stats(model, cs)
+            if c.stats["outliers"]:
+                _reseed(c, argv, cs, in_process, log)
         except CalibrationError as e:
             if not cands:
                 raise

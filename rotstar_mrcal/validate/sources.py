@@ -18,8 +18,10 @@ How the pieces are found, in order:
               be read, else the dataset's truth.cameramodel (simulated data)
     truth     <dataset>/truth.json and truth.cameramodel (rotstar-simulate)
 
-Only boards are kept (images with a `- - -` row are dropped); names are the
-pose folder names (seq/<pose>/<file> -> <pose>).
+Only boards mrcal uses are kept (images with a `- - -` row are dropped, and
+so are boards with too few corners for mrcal: vnl.mrcal_keeps, for files
+that another tool wrote); names are the pose folder names
+(seq/<pose>/<file> -> <pose>).
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ import numpy as np
 
 from .. import dataset
 from ..pattern.layout import Layout
-from ..vnl import read_corners
+from ..vnl import mrcal_keeps, read_corners
 from .calibrate import vnl_has_weights
 from .compare import TestSet, TrueCamera
 
@@ -132,7 +134,7 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
             boards = read_corners(f, layout.nx, layout.ny)
         except ValueError as e:
             raise SourceError(f"{vnl}: {e} (is pattern.json the pattern of these corners?)") from None
-    files = [n for n in names if boards.get(n) is not None]
+    files = [n for n in names if mrcal_keeps(boards.get(n))]
     if not files:
         raise SourceError(f"{vnl}: no boards in it")
     corners = np.stack([boards[n] for n in files])

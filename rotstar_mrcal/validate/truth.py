@@ -115,14 +115,17 @@ def _align(model: mrcal.cameramodel, rt_true: np.ndarray) -> np.ndarray | None:
 
 
 def truth_error(model: mrcal.cameramodel, truth_model: mrcal.cameramodel, rt_true=None,
-                gridn_width: int = 40, distance: float | None = None) -> TruthError:
+                gridn_width: int = 40, distance: float | None = None, q=None) -> TruthError:
     """Projection error of a calibrated model against the true model over the imager
 
     rt_true: (Nframes, 6) true rt_cam_board of each of the calibration's
     frames (truth_poses_of), NaN rows for unknown ones; None: fall back to
-    mrcal.projection_diff. distance None: at infinity.
+    mrcal.projection_diff. distance None: at infinity. q: the pixels (..., 2)
+    to compare at instead of a grid gridn_width wide (needs rt_true).
     """
     Rt = None if rt_true is None else _align(model, np.asarray(rt_true, float))
+    if Rt is None and q is not None:
+        raise ValueError("the error at given pixels needs the true poses (rt_true) of at least two frames")
     if Rt is None:
         W, H = model.imagersize()
         difflen, _, q, Rt10 = mrcal.projection_diff((model, truth_model), gridn_width=gridn_width,
@@ -130,7 +133,7 @@ def truth_error(model: mrcal.cameramodel, truth_model: mrcal.cameramodel, rt_tru
                                                     focus_radius=min(W, H) / 2)
         angle = float(np.degrees(np.linalg.norm(mrcal.r_from_R(Rt10[:3]))))
         return TruthError(q, difflen, angle, "projection_diff")
-    q = imager_grid(model.imagersize(), gridn_width)
+    q = imager_grid(model.imagersize(), gridn_width) if q is None else np.asarray(q, float)
     v = mrcal.unproject(q, *model.intrinsics(), normalize=True)
     if distance is None:
         p = mrcal.rotate_point_R(Rt[:3], v)
