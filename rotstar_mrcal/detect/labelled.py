@@ -45,6 +45,8 @@ from .rough import rough_corners
 LARGE_ELEMENT = 12.0  # px, inscribed half-size above which the curve intersection starts the refinement
 WINDOW_FRACTION = 0.65
 MIN_WINDOW = 2.0
+REGION_EDGE_PX = 1.0  # an identity region's edge pixels lie inside the element's edge (median 0.9 px against
+#                       the border lattice's holes on a simulated D435 view): added to its half-side
 PARITY_MIN = 0.25  # |checker phase| above which frame 0's colours are decided
 MAX_PARITY_DISAGREE = 0.25  # share of elements whose colours may contradict their identity before the pose fails
 
@@ -60,12 +62,16 @@ class LabelledElements:
 
 
 def window_of(contour: np.ndarray, centre: np.ndarray, shape, window: float) -> float:
-    """The refinement half-window about centre in an element bounded by contour, ignoring image-border points"""
+    """The refinement half-window about centre in an element bounded by contour, ignoring image-border points
+
+    contour: the element's identity region, whose edge pixels lie about
+    REGION_EDGE_PX inside the element's edge.
+    """
     H, W = shape
     c = np.asarray(contour, float)
     inner = (c[:, 0] > 0) & (c[:, 1] > 0) & (c[:, 0] < W - 1) & (c[:, 1] < H - 1)
     c = c[inner] if inner.any() else c
-    half = float(np.min(np.max(np.abs(c - centre), axis=-1)))
+    half = float(np.min(np.max(np.abs(c - centre), axis=-1))) + REGION_EDGE_PX
     return float(np.clip(WINDOW_FRACTION * half, MIN_WINDOW, window))
 
 
