@@ -30,7 +30,7 @@ import numpy as np
 from ..atomic import atomic_path
 from ..detect.display import DisplayCheck, dataset_offsets
 from . import coverage
-from .motion import difference_signal, downsample, is_still
+from .motion import difference_signal, downsample, is_still, screen_pixels
 from .pose import quick_check, value_scale, write_segmented
 from .segment import Options, SegmentError, segment, threshold
 from .source import FrameSource, record
@@ -157,8 +157,8 @@ def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frame
         seg = segment(frames, pattern["frames"], layout, full_scale, so)
         ds.tau = seg.tau
     except SegmentError as e:
-        d, _ = difference_signal(frames, full_scale, so.step)
-        ds.tau = threshold(d, so.k, so.ratio)
+        d, _ = difference_signal(frames, full_scale, so.step, screen_pixels(frames, full_scale, so.step))
+        ds.tau = threshold(d, so.k, so.ratio)  # as segment() would have set it
         entry.update(ok=False, error=str(e))
         return PoseOutcome(False, [f"{ds.what(pose)}: not usable: {e}"])
     messages = []
