@@ -5,6 +5,7 @@ import os
 import shutil
 
 import numpy as np
+import pytest
 
 from rotstar_mrcal import dataset
 from rotstar_mrcal.benchmark import speed
@@ -20,7 +21,8 @@ def test_measure_speed_on_two_poses(d435_seq, tmp_path):
     r = speed.measure_speed(str(seq), repeats=1)
     assert [p.pose for p in r.poses] == ["pose000", "pose001"] and all(p.found for p in r.poses)
     assert all(p.decode_s > 0 and p.detect_s > 0 for p in r.poses)
-    assert r.n_images == 18
+    assert r.n_images == 2 * len(d435_seq.layout.frames())  # every frame of the sequence, identity frames included
+    assert len(d435_seq.layout.frames()) == 22
     # the command did everything the in-process calls did, and started up
     assert r.command_s > 0 and r.startup_s >= 0
     assert r.ratio_with_startup >= r.ratio
@@ -49,8 +51,19 @@ def test_write_dataset_round_trip(tmp_path):
     rng = np.random.default_rng(0)
     frames = rng.integers(0, 65536, (8, 30, 40)).astype(np.float32)
     checker = rng.uniform(0, 65535, (30, 40))
-    seq = speed.write_dataset(str(tmp_path / "seq"), layout, [(frames, checker)], bits=16)
+    identity = rng.integers(0, 65536, (10, 30, 40)).astype(np.float32)
+    seq = speed.write_dataset(str(tmp_path / "seq"), layout, [(frames, checker, identity)], bits=16)
     p = dataset.load_pose(seq, "pose000", dataset.read_pattern(seq)[1])
     np.testing.assert_array_equal(p.rotstar, frames)
+    np.testing.assert_array_equal(p.identity, identity)
     np.testing.assert_array_equal(p.checkerboard, np.round(checker))
     assert p.full_scale == 65535.0
+    # captures without identity frames (the benchmark's): a dataset whose pattern.json lists none
+    seq = speed.write_dataset(str(tmp_path / "lean"), layout, [(frames, checker)], bits=8)
+    d, lean = dataset.read_pattern(seq)
+    assert not lean.identity and "identity" not in d
+    p = dataset.load_pose(seq, "pose000", lean)
+    assert p.identity is None and p.full_scale == 255.0
+    np.testing.assert_array_equal(p.rotstar, np.clip(frames, 0, 255))
+    with pytest.raises(ValueError, match="3 identity frames, the layout has 10"):
+        speed.write_dataset(str(tmp_path / "bad"), layout, [(frames, checker, identity[:3])], bits=16)

@@ -19,7 +19,9 @@ Per pose of the dataset, in this process:
 
 * decode: `dataset.load_pose`, i.e. reading and decoding every PNG of the
   pose folder into float32 arrays (what rotstar-detect does first);
-* detect: `detect_pose` on those frames with the default options.
+* detect: `detect_pose` on those frames with the default options (the
+  identity frames passed along when the pattern has them, as rotstar-detect
+  does).
 
 For the whole dataset, in child processes:
 
@@ -221,7 +223,7 @@ def measure_speed(seq: str, repeats: int = 3, mrgingham: bool = True, log=None) 
     images = sorted(glob.glob(os.path.join(glob.escape(seq), "*", "*.png")))
     with one_cpu():
         p = dataset.load_pose(seq, names[0], frames)
-        detect_pose(p.rotstar, layout, full_scale=p.full_scale)  # warm-up
+        detect_pose(p.rotstar, layout, full_scale=p.full_scale, identity=p.identity)  # warm-up
         t = np.zeros((repeats, len(names), 2))  # (run, pose, decode | detect)
         found = []
         for k in range(repeats):  # whole passes over the poses, as the command makes one
@@ -229,7 +231,7 @@ def measure_speed(seq: str, repeats: int = 3, mrgingham: bool = True, log=None) 
                 t0 = time.process_time()
                 p = dataset.load_pose(seq, name, frames)
                 t1 = time.process_time()
-                r = detect_pose(p.rotstar, layout, full_scale=p.full_scale)
+                r = detect_pose(p.rotstar, layout, full_scale=p.full_scale, identity=p.identity)
                 t[k, i] = t1 - t0, time.process_time() - t1
                 if k == 0:
                     found.append(r.found)
@@ -264,11 +266,11 @@ def profile_pose(seq: str, pose: str | None = None, top: int = 12, runs: int = 5
     pose = pose or dataset.list_poses(seq, pattern["frames"])[0]
     p = dataset.load_pose(seq, pose, pattern["frames"])
     with one_cpu():
-        detect_pose(p.rotstar, layout, full_scale=p.full_scale)  # warm-up
+        detect_pose(p.rotstar, layout, full_scale=p.full_scale, identity=p.identity)  # warm-up
         prof = cProfile.Profile()
         prof.enable()
         for _ in range(runs):
-            detect_pose(p.rotstar, layout, full_scale=p.full_scale)
+            detect_pose(p.rotstar, layout, full_scale=p.full_scale, identity=p.identity)
         prof.disable()
     st = pstats.Stats(prof).stats  # {(file, line, name): (cc, nc, tt, ct, callers)}
     rows = sorted(st.items(), key=lambda kv: -kv[1][2])[:top]
@@ -290,26 +292,37 @@ def profile_table(entries: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def write_dataset(folder: str, layout, poses: list[tuple[np.ndarray, np.ndarray | None]], bits: int) -> str:
-    """A dataset folder from in-memory captures: [(rotstar frames (8, H, W), checkerboard (H, W) or None)]
+def write_dataset(folder: str, layout, poses: list[tuple], bits: int) -> str:
+    """A dataset folder from in-memory captures: [(rotstar (8, H, W), checkerboard (H, W) or None[, identity])]
 
-    Frames are written as 8- or 16-bit PNGs (values rounded and clipped), one
-    folder per pose named pose000, pose001, ...
+    identity: the identity frames (n, H, W) of a pose, or None. When a pose
+    has none, the dataset's pattern.json lists none (the layout without
+    identity frames), so that every pose holds every frame it lists. Frames
+    are written as 8- or 16-bit PNGs (values rounded and clipped), one folder
+    per pose named pose000, pose001, ...
     """
     from .. import dataset
 
+    poses = [tuple(p) + (None,) * (3 - len(p)) for p in poses]
+    if any(p[2] is None for p in poses):
+        layout = dataclasses.replace(layout, identity=False)
     dtype, top = (np.uint8, 255) if bits == 8 else (np.uint16, 65535)
     names = {f["kind"]: f["file"] for f in layout.frames() if f["kind"] == "checkerboard"}
     rot = [f["file"] for f in layout.frames() if f["kind"] == "rotstar"]
+    ids = [f["file"] for f in layout.frames() if f["kind"] == "identity"]
     dataset.write_pattern(folder, layout)
 
     def q(a):
         return np.clip(np.round(a), 0, top).astype(dtype)
 
-    for i, (frames, checker) in enumerate(poses):
+    for i, (frames, checker, identity) in enumerate(poses):
         imgs = {fn: q(f) for fn, f in zip(rot, frames)}
         if checker is not None and "checkerboard" in names:
             imgs[names["checkerboard"]] = q(checker)
+        if ids:
+            if len(identity) != len(ids):
+                raise ValueError(f"pose {i}: {len(identity)} identity frames, the layout has {len(ids)}")
+            imgs.update({fn: q(f) for fn, f in zip(ids, identity)})
         dataset.write_pose(folder, f"pose{i:03d}", imgs)
     return folder
 
