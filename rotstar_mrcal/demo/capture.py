@@ -9,7 +9,8 @@ SYNOPSIS
 Per exposure k of pose i of group g, the noise comes from
 default_rng([seed, ord(g), i, k]): one capture of each rotating-star frame,
 then CAPTURES captures of the checkerboard frame and of the square board
-averaged over the screen's part of the image (simulate.captures). The square
+averaged over the screen's part of the image (simulate.captures), then one
+capture of each identity frame. The square
 board goes to <exposure>/<g>-square/poseNNN/checkerboard.png as 8 bits, for
 mrgingham; with keep_images every frame is written as a rotstar dataset.
 """
@@ -76,7 +77,8 @@ def capture_pose(job: Job) -> PoseResult:
     t0 = time.perf_counter()
     layout, model = _W["layout"], _W["model"]
     kw = dict(supersample=2, psf=_W["psf"], rays=_W["rays"])
-    E = simulate.render_irradiance(_W["screen"], model, job.rt, **kw)  # 8 rotating-star frames + checkerboard
+    E = simulate.render_irradiance(_W["screen"], model, job.rt, **kw)  # every frame of layout.frames()
+    kinds = np.array([f["kind"] for f in layout.frames()])
     Es = simulate.render_irradiance(_W["screen_square"], model, job.rt_square, **kw)[0]
     pose = f"pose{job.index:03d}"
     results, crops = {}, {}
@@ -87,19 +89,22 @@ def capture_pose(job: Job) -> PoseResult:
         def expose(img):
             return simulate.expose(img, gain=gain, noise=NOISE, shot=SHOT, bits=16, rng=rng)
 
-        rot = expose(E[:-1])
-        cb = averaged_captures(E[-1], expose, CAPTURES, roi=lit_box(E[-1]))
+        rot = expose(E[kinds == "rotstar"])
+        Ec = E[np.flatnonzero(kinds == "checkerboard")[0]]
+        cb = averaged_captures(Ec, expose, CAPTURES, roi=lit_box(Ec))
         sq = averaged_captures(Es, expose, CAPTURES, roi=lit_box(Es))
-        found = detect_methods(rot, layout, 65535.0, cb, job.methods)
+        ident = expose(E[kinds == "identity"]) if layout.identity else None  # (last: the others' noise as before)
+        found = detect_methods(rot, layout, 65535.0, cb, job.methods, identity=ident)
         results[label] = {m: (f.corners, f.weights, f.why) for m, f in found.items()}
         edir = exposure_dir(job.out, label)
         sqdir = os.path.join(edir, f"{job.group}-square", pose)
         os.makedirs(sqdir, exist_ok=True)
         cv2.imwrite(os.path.join(sqdir, "checkerboard.png"), np.clip(np.round(sq / 257.0), 0, 255).astype(np.uint8))
         if job.keep_images:
+            imgs = {"rotstar": iter(rot), "identity": iter(() if ident is None else ident),
+                    "checkerboard": iter([np.round(cb).astype(np.uint16)])}
             dataset.write_pose(os.path.join(edir, job.group), pose,
-                               {f["file"]: img for f, img in zip(layout.frames(),
-                                                                 list(rot) + [np.round(cb).astype(np.uint16)])})
+                               {f["file"]: next(imgs[f["kind"]]) for f in layout.frames()})
         if job.index == 0:  # close-ups for the report: the corner nearest an image corner
             d = np.linalg.norm(truth - (0, 0), axis=-1)
             j, i = np.unravel_index(np.argmin(d), d.shape)
