@@ -29,8 +29,10 @@ the panel scans out). Segmentation, step by step:
 3. stretches: maximal runs of frames joined by d < tau, at least min_len
    frames long; shorter runs (transition frames) are dropped. Inside the
    stretches d must be near the sensor noise (motion.noise_floor, estimated
-   from a frame itself): a moving view raises the median, and with it the
-   threshold, so this is what recognises it;
+   from a frame itself over the same pixels; edges on the screen make it an
+   overestimate when the board is small, up to about 2x): a moving view
+   raises the median, and with it the threshold, so this is what
+   recognises it;
 4. each stretch's core: `guard` frames dropped at each end, then the middle
    `average` frames (the paper averages 8); its level is the core's mean;
 5. start markers: the darkest stretches, split from the rest at the widest
@@ -38,9 +40,13 @@ the panel scans out). Segmentation, step by step:
 6. loops: a marker followed by exactly len(frames) stretches and then the
    next marker (or the end of the recording). Fewer means a display frame
    was dropped, more means something flickered: that loop is rejected with
-   the reason and another loop is used. The order inside a loop is the
-   order in time, so no two frames are ever swapped; two display frames
-   merged into one stretch leave the loop a frame short and reject it;
+   the reason and another loop is used. Files are assigned in the order of
+   time, so two display frames merged into one stretch leave the loop a
+   frame short and reject it rather than shift the files after them (only a
+   merge and a split in the same loop could shift them: over the rotating-
+   star frames the level steps of 7 catch that; over the identity frames
+   the detector's reading does, as a missing or repeated frame changes the
+   number of white frames in most elements);
 7. order check against pattern.json: the loop's levels must follow the
    expected levels (display/loop.py): correlation >= min_correlation, and
    every large expected step between neighbours (the border band flips
