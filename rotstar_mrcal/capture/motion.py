@@ -24,11 +24,11 @@ Both are taken over the pixels the player changes (screen_pixels: those
 whose range over the recording is a good part of the largest range), not
 over the whole image: a board far from the camera covers a few per cent of
 the image, and averaged over the whole image the change between two identity
-frames (about half of the elements flip, a quarter of the board's area) sank
-to about the noise floor of the room around the screen (measured: 1.1-1.3 x
-the threshold for a D435 at 0.6 m, where the rotating-star frames' band flip
-gave 2 x). Over the screen's pixels it is many times the noise at any
-distance.
+frames (about half of the elements flip, a quarter of the board's area) sinks
+into the noise of the room around the screen (a D435 with the default board
+at 0.6 m: barely above segmentation's threshold; at 0.9 m below it). Over
+the screen's pixels it is many times the noise at any distance
+(tests/test_segment.py, the board's corners on 1 % of the image).
 
 image_shift measures how far the image moved between two (averaged)
 frames of the same display frame: one Lucas-Kanade step for a translation
