@@ -474,10 +474,19 @@ def many_poses(seq, tmp_path_factory) -> str:
     return s
 
 
+def ctrl_c_reaches_it() -> None:
+    """In the child, before exec: Ctrl-C's default action, as a terminal's foreground job has it
+
+    A test run started in the background of a non-interactive shell (`make test &`, a CI step) inherits
+    SIGINT ignored, and so would the command under test: it would run to the end, unmoved by Ctrl-C.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start_detect(many_poses, tmp_path, *extra):
     p = subprocess.Popen([os.path.join(VENV_BIN, "rotstar-detect"), many_poses, "--jobs", "2", *extra],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=cli_env(),
-                         start_new_session=True)
+                         start_new_session=True, preexec_fn=ctrl_c_reaches_it)
     t0 = time.monotonic()
     while len(children(p.pid)) < 2:  # the two workers
         assert p.poll() is None and time.monotonic() - t0 < 30, p.communicate()
@@ -512,7 +521,7 @@ def test_ctrl_c_prints_one_line_and_exits_130(many_poses, tmp_path):
 
 def test_ctrl_c_one_process(many_poses, tmp_path):
     p = subprocess.Popen([os.path.join(VENV_BIN, "rotstar-detect"), many_poses, "-o", "c.vnl"], stderr=subprocess.PIPE,
-                         text=True, cwd=tmp_path, env=cli_env())
+                         text=True, cwd=tmp_path, env=cli_env(), preexec_fn=ctrl_c_reaches_it)
     t0 = time.monotonic()
     while "[1/" not in open(f"/proc/{p.pid}/cmdline").read() and time.monotonic() - t0 < 1.5:
         time.sleep(0.05)
