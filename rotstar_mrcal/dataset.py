@@ -14,7 +14,7 @@ SYNOPSIS
     ['pose000']
     >>> pose = dataset.load_pose(seq, "pose000", dataset.read_pattern(seq)[1])
     >>> pose.rotstar.shape, pose.identity.shape, pose.checkerboard.shape, pose.full_scale
-    ((8, 40, 60), (11, 40, 60), (40, 60), 65535.0)
+    ((8, 40, 60), (10, 40, 60), (40, 60), 65535.0)
 
 Layout on disk:
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import stat
 import sys
 import textwrap
@@ -24,19 +25,20 @@ from rotstar_mrcal.cli.capture import main as rotstar_capture
 from rotstar_mrcal.display.loop import player_loop
 from rotstar_mrcal.pattern.layout import make_layout
 
-LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)
+LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)  # the default sequence: 8 + 10 identity frames + 1
 N_ENTRIES = len(player_loop(LAYOUT.frames()))
-HOLD = 18  # 10 entries x 18 refreshes at 60 Hz = 3 s = exactly 75 frames at 25 fps: the stream repeats
+HOLD = 18  # 20 entries x 18 refreshes at 60 Hz = 6 s = exactly 150 frames at 25 fps: the stream repeats
+LOOP = 150
 
 
 @pytest.fixture(scope="module")
 def loop_frames():
-    """One loop of the player (75 camera frames, 16-bit) as the pinhole-small camera sees it; repeats seamlessly"""
+    """One loop of the player (150 camera frames, 16-bit) as the pinhole-small camera sees it; repeats seamlessly"""
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, LAYOUT, 1, np.random.default_rng(3))[0]
     E = loop_irradiance(LAYOUT, model, rt)
-    sched = player_schedule(N_ENTRIES, hold=HOLD, refresh_hz=60, duration=6.5)
-    frames, _ = camera_stream(E, sched, 75, fps=25, exposure_s=0.012, noise=0.01, t0=0.013, rng=7)
+    sched = player_schedule(N_ENTRIES, hold=HOLD, refresh_hz=60, duration=12.5)
+    frames, _ = camera_stream(E, sched, LOOP, fps=25, exposure_s=0.012, noise=0.01, t0=0.013, rng=7)
     return frames
 
 
@@ -166,13 +168,13 @@ def run_capture(argv, capsys, source=None, stdin: str | None = None, monkeypatch
 
 def test_capture_auto_two_poses_from_a_replay(loop_frames, pattern_dir, tmp_path, capsys):
     """Pose A (still), the camera moving, pose B (still, the board elsewhere): two poses, then the end"""
-    A = np.concatenate([loop_frames] * 3)[:200]
-    moving = np.stack([np.roll(loop_frames[k % 75], (k, 2 * k), axis=(0, 1)) for k in range(30)])
-    B = np.roll(np.concatenate([loop_frames] * 4)[:260], (-120, -200), axis=(1, 2))
+    A = np.concatenate([loop_frames] * 3)[:400]
+    moving = np.stack([np.roll(loop_frames[k % LOOP], (k, 2 * k), axis=(0, 1)) for k in range(30)])
+    B = np.roll(np.concatenate([loop_frames] * 4)[:520], (-120, -200), axis=(1, 2))
     save_recording(str(tmp_path / "session.npy"), np.concatenate([A, moving, B]), fps=25)
     out_dir = tmp_path / "seq"
     code, out, err = run_capture(["--backend", "replay", "--device", tmp_path / "session.npy",
-                                  "--pattern", pattern_dir, "--out", out_dir, "--auto", "--frames", 190,
+                                  "--pattern", pattern_dir, "--out", out_dir, "--auto", "--frames", 380,
                                   "--keep-raw"], capsys)
     assert code == 0, err
     assert out.split() == [str(out_dir / "pose000"), str(out_dir / "pose001")]
@@ -190,6 +192,11 @@ def test_capture_auto_two_poses_from_a_replay(loop_frames, pattern_dir, tmp_path
     a = cv2.imread(str(out_dir / "pose000" / "rotstar_00.png"), cv2.IMREAD_UNCHANGED).astype(float)
     b = cv2.imread(str(out_dir / "pose001" / "rotstar_00.png"), cv2.IMREAD_UNCHANGED).astype(float)
     assert np.abs(np.roll(a, (-120, -200), axis=(0, 1))[40:-40, 80:-80] - b[40:-40, 80:-80]).mean() < 0.01 * 65535
+    # every pose holds every frame of pattern.json, the identity frames included
+    names = [f["file"] for f in LAYOUT.frames()]
+    assert "identity_09.png" in names and "identity_10.png" not in names
+    for p in ("pose000", "pose001"):
+        assert sorted(f for f in os.listdir(out_dir / p) if f.endswith(".png")) == sorted(names)
 
 
 def test_capture_interactive_and_failures(loop_frames, pattern_dir, tmp_path, capsys, monkeypatch):
@@ -197,14 +204,14 @@ def test_capture_interactive_and_failures(loop_frames, pattern_dir, tmp_path, ca
     save_recording(str(tmp_path / "still.npy"), rec, fps=25)
     # Enter, then q
     code, out, err = run_capture(["--backend", "replay", "--device", tmp_path / "still.npy", "--pattern", pattern_dir,
-                                  "--out", tmp_path / "a", "--frames", 180], capsys, stdin="\nq\n",
+                                  "--out", tmp_path / "a", "--frames", 360], capsys, stdin="\nq\n",
                                  monkeypatch=monkeypatch)
     assert code == 0, err
     assert "pose000: place the camera, hold still, press Enter" in err and "pose001: place" in err
     assert out.split() == [str(tmp_path / "a" / "pose000")] and not (tmp_path / "a" / "raw").exists()
     # a recording shorter than a loop (here: without the start marker): said so, nothing written, exit 1
     code, out, err = run_capture(["--backend", "replay", "--device", tmp_path / "still.npy", "--pattern", pattern_dir,
-                                  "--out", tmp_path / "b", "--frames", 60, "--poses", 1], capsys, stdin="\n",
+                                  "--out", tmp_path / "b", "--frames", 120, "--poses", 1], capsys, stdin="\n",
                                  monkeypatch=monkeypatch)
     assert code == 1 and "pose000: not usable: no start marker" in err and out == ""
     # bad arguments
@@ -224,7 +231,7 @@ def test_segment_cli_on_a_folder_of_8bit_frames(loop_frames, pattern_dir, tmp_pa
 
     folder = tmp_path / "frames"
     folder.mkdir()
-    for k, f in enumerate(np.concatenate([loop_frames] * 2)[:160]):
+    for k, f in enumerate(np.concatenate([loop_frames] * 2)[:300]):
         cv2.imwrite(str(folder / f"{k}.png"), (f // 257).astype(np.uint8))
     code = rotstar_segment([str(folder), "--pattern", str(pattern_dir / "pattern.json"), "--out",
                             str(tmp_path / "seq" / "p"), "--average", "4"])
@@ -238,7 +245,7 @@ def test_segment_cli_on_a_folder_of_8bit_frames(loop_frames, pattern_dir, tmp_pa
     # again: refused without --force
     assert rotstar_segment([str(folder), "--pattern", str(pattern_dir), "--out", str(tmp_path / "seq" / "p")]) == 2
     # and a 10-bit recording in 16-bit words is scaled up
-    save_recording(str(tmp_path / "ten.npy"), np.concatenate([loop_frames] * 2)[:160] // 64)
+    save_recording(str(tmp_path / "ten.npy"), np.concatenate([loop_frames] * 2)[:300] // 64)
     assert rotstar_segment([str(tmp_path / "ten.npy"), "--pattern", str(pattern_dir), "--out",
                             str(tmp_path / "seq" / "q")]) == 0
     err = capsys.readouterr().err

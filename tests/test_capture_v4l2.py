@@ -523,16 +523,19 @@ def test_describe_nodes_for_the_first_contact(sysfs, capsys):
 # ---- rotstar-capture through the fake device -------------------------------------------------
 @pytest.fixture(scope="module")
 def player_loop_frames():
-    """One loop of the player as a 640x400 camera sees it (75 frames at 25 fps; repeats seamlessly)"""
+    """One loop of the player (the default sequence, identity frames included: 20 entries of 18 refreshes at 60 Hz)
+    as a 640x400 camera sees it (150 frames at 25 fps; repeats seamlessly)"""
     from rotstar_mrcal import simulate
     from rotstar_mrcal.capture.simulated import camera_stream, loop_irradiance, player_schedule
+    from rotstar_mrcal.display.loop import player_loop
     from rotstar_mrcal.pattern.layout import make_layout
 
     layout = make_layout(screen=(800, 600), pitch=100, band=24)
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, layout, 1, np.random.default_rng(3))[0]
     E = loop_irradiance(layout, model, rt)
-    frames, _ = camera_stream(E, player_schedule(10, hold=18, duration=6.5), 75, fps=25, exposure_s=0.012,
+    n = len(player_loop(layout.frames()))
+    frames, _ = camera_stream(E, player_schedule(n, hold=18, duration=12.5), n * 18 * 25 // 60, fps=25, exposure_s=0.012,
                               noise=0.005, gain=0.6, t0=0.013, rng=8)
     return layout, frames
 
@@ -558,7 +561,7 @@ def test_capture_cli_through_the_fake_d435(player_loop_frames, tmp_path, capsys,
     src = V4L2Source("/dev/video2", size=(640, 400), fps=25, sys=fake)
     monkeypatch.setattr(sys, "stdin", io.StringIO("\nq\n"))
     code = rotstar_capture(["--pattern", str(tmp_path), "--out", str(tmp_path / "seq"), "--size", "640x400",
-                            "--exposure", "2000,4000", "--frames", "180"], source=src)
+                            "--exposure", "2000,4000", "--frames", "360"], source=src)
     out, err = capsys.readouterr()
     assert code == 0, err
     assert out.split() == [str(tmp_path / "seq" / "exp2000us" / "pose000"), str(tmp_path / "seq" / "exp4000us" / "pose000")]
@@ -569,6 +572,9 @@ def test_capture_cli_through_the_fake_d435(player_loop_frames, tmp_path, capsys,
     a = cv2_read(tmp_path / "seq" / "exp2000us" / "pose000" / "checkerboard.png")
     b = cv2_read(tmp_path / "seq" / "exp4000us" / "pose000" / "checkerboard.png")
     assert 0.45 < a.mean() / b.mean() < 0.55
+    ids = [f["file"] for f in layout.frames() if f["kind"] == "identity"]
+    assert len(ids) == 10 and all((tmp_path / "seq" / e / "pose000" / f).exists()
+                                  for e in ("exp2000us", "exp4000us") for f in ids)
     assert (tmp_path / "seq" / "exp2000us" / "pattern.json").exists()
     log = json.loads((tmp_path / "seq" / "capture.json").read_text())
     assert log["source"]["device"] == "/dev/video2" and log["source"]["format"]["fourcc"] == "Y16"
@@ -587,7 +593,7 @@ def test_capture_cli_stops_when_a_control_fails(player_loop_frames, tmp_path, ca
     fake = FakeD435(lambda k, w, h, code: loop[k % len(loop)])
     del fake.nodes["/dev/video2"].xu[uvc_xu.D4XX.EXPOSURE]  # a firmware that stalls the exposure selector
     argv = ["--pattern", str(tmp_path), "--out", str(tmp_path / "seq"), "--size", "640x400", "--exposure", "3000",
-            "--frames", "180"]
+            "--frames", "360"]
     monkeypatch.setattr(sys, "stdin", io.StringIO("\n"))
     code = rotstar_capture(argv, source=V4L2Source("/dev/video2", size=(640, 400), sys=fake))
     err = capsys.readouterr().err

@@ -57,3 +57,29 @@ def test_exposure_figure(tmp_path):
     fn = str(tmp_path / "exposures.png")
     plots.exposure_figure({label: (crop, crop) for label, _ in scene.EXPOSURES}, fn)
     assert os.path.getsize(fn) > 1000
+
+
+def test_capture_pose_uses_every_frame_of_the_sequence(tmp_path):
+    """One demo pose on a small screen: the rendered frames split by kind (8 rotating-star, 10 identity, the
+    checkerboard), every method finds the board near the truth, and --keep-images writes every frame"""
+    from rotstar_mrcal.demo import capture
+
+    model = simulate.preset_model("pinhole-small")
+    layout = make_layout(screen=(800, 600), pitch=100, band=24)
+    square = make_layout(screen=(1000, 1000), pitch=100, band=24, nx=6, ny=6)
+    rt = simulate.random_poses(model, layout, 1, np.random.default_rng(0))[0]
+    capture.init_worker(layout, square, (model.intrinsics(), model.imagersize()), simulate.camera_rays(model))
+    try:
+        r = capture.capture_pose(capture.Job("A", 0, rt, rt, 1, str(tmp_path), True, ("rotstar", "saddle")))
+    finally:
+        capture._W.clear()
+    truth = simulate.true_corners(model, layout, rt)
+    for label, found in r.found.items():
+        for m, (corners, _, why) in found.items():
+            assert corners is not None, (label, m, why)
+            assert np.abs(corners - truth).max() < 0.2, (label, m)
+    pose = tmp_path / scene.exposure_dir("", scene.EXPOSURES[0][0]) / "A" / "pose000"
+    assert sorted(os.listdir(pose)) == sorted(f["file"] for f in layout.frames())
+    dataset.write_pattern(str(pose.parent), layout)
+    p = dataset.load_pose(str(pose.parent), "pose000", layout)
+    assert p.rotstar.shape == (8, 400, 640) and p.identity.shape == (10, 400, 640)

@@ -139,7 +139,8 @@ def test_pattern_files_written_atomically(tmp_path):
     r = cli("rotstar-pattern", "--out", "p", "--screen", "800x600", "--pitch", "100", "--band", "24", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     files = sorted(os.listdir(tmp_path / "p"))
-    assert leftovers(tmp_path / "p") == [] and "pattern.json" in files and len(files) == 11  # 9 PNGs, json, html
+    # 8 rotating-star, 10 identity (6x4 corners) and the checkerboard PNGs, json, html
+    assert leftovers(tmp_path / "p") == [] and "pattern.json" in files and len(files) == 21
     assert dataset.read_pattern(str(tmp_path / "p"))[1].nx == 6
 
 
@@ -254,6 +255,61 @@ def test_pattern_json_with_one_rotstar_frame(seq, tmp_path):
     d["frames"] = d["frames"][:1] + d["frames"][-1:]
     json.dump(d, open(os.path.join(s, "pattern.json"), "w"))
     one_line_error(cli("rotstar-detect", s, cwd=tmp_path), 2, "frames has 1 rotating-star frame(s); need at least 2")
+
+
+def _identity_frames(d: dict) -> list[int]:
+    return [k for k, f in enumerate(d["frames"]) if f["kind"] == "identity"]
+
+
+def _swap_identity(d):
+    k = _identity_frames(d)
+    d["frames"][k[2]], d["frames"][k[3]] = d["frames"][k[3]], d["frames"][k[2]]
+
+
+IDENTITY_CASES = {  # id: (change to pattern.json, what the message says)
+    "frames-missing": (lambda d: d.update(frames=[f for f in d["frames"] if f["kind"] != "identity"]),
+                       "frames: no identity frames, though the identity section describes 10"),
+    "out-of-order": (_swap_identity, "frames: identity frames with indices [0, 1, 3, 2, 4"),
+    "one-too-few": (lambda d: d["frames"].pop(_identity_frames(d)[-1]),
+                    "frames: identity frames with indices [0, 1, 2, 3, 4, 5, 6, 7, 8]; the 6x4 grid's code needs 0..9"),
+    "index-not-a-number": (lambda d: d["frames"][_identity_frames(d)[0]].update(index="0"),
+                           "identity frames with indices ['0', 1"),
+    "section-of-another-grid": (lambda d: d.update(identity=make_layout().to_dict()["identity"]),
+                                "identity: frames 13, weight 6; a 6x4 grid's code has 10 frames of weight 5"),
+    "section-missing": (lambda d: d.pop("identity"), "identity missing: frames lists 10 identity frame(s)"),
+    "section-not-an-object": (lambda d: d.update(identity=[1, 2]), "identity is not an object"),
+    "codewords-changed": (lambda d: d["identity"]["codewords"].reverse(), "identity.codewords differ"),
+}
+
+
+def _write_identity_case(seq, dst, case) -> str:
+    s = copy_seq(seq, dst, poses=("pose000",))
+    d = json.load(open(os.path.join(s, "pattern.json")))
+    IDENTITY_CASES[case][0](d)
+    with open(os.path.join(s, "pattern.json"), "w") as f:
+        json.dump(d, f)
+    return s
+
+
+@pytest.mark.parametrize("case", IDENTITY_CASES)
+def test_bad_identity_frames_in_pattern_json(seq, tmp_path, case):
+    s = _write_identity_case(seq, tmp_path / "seq", case)
+    one_line_error(cli("rotstar-detect", s, cwd=tmp_path), 2, os.path.join(s, "pattern.json") + ": ",
+                   IDENTITY_CASES[case][1])
+
+
+def test_bad_identity_frames_refused_by_every_tool(seq, tmp_path):
+    """The same one line, exit 2, from the tools that read a pattern.json before recording or rendering"""
+    s = _write_identity_case(seq, tmp_path / "seq", "one-too-few")
+    says = os.path.join(s, "pattern.json") + ": frames: identity frames with indices"
+    rec = os.path.join(s, "pose000")
+    for tool, *args in (("rotstar-segment", rec, "--pattern", s, "--out", tmp_path / "out" / "pose000"),
+                        ("rotstar-capture", "--backend", "replay", "--device", "nothing.npy", "--pattern", s,
+                         "--out", tmp_path / "cap"),
+                        ("rotstar-simulate", "--pattern", s, "--out", tmp_path / "sim", "--camera", "pinhole-small"),
+                        ("rotstar-calibrate", s, "--outdir", tmp_path / "cal")):
+        one_line_error(cli(tool, *args, cwd=tmp_path), 2, says)
+    assert not any((tmp_path / d).exists() for d in ("out", "cap", "sim", "cal"))
 
 
 def test_pattern_json_not_an_object(tmp_path):
@@ -418,10 +474,19 @@ def many_poses(seq, tmp_path_factory) -> str:
     return s
 
 
+def ctrl_c_reaches_it() -> None:
+    """In the child, before exec: Ctrl-C's default action, as a terminal's foreground job has it
+
+    A test run started in the background of a non-interactive shell (`make test &`, a CI step) inherits
+    SIGINT ignored, and so would the command under test: it would run to the end, unmoved by Ctrl-C.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start_detect(many_poses, tmp_path, *extra):
     p = subprocess.Popen([os.path.join(VENV_BIN, "rotstar-detect"), many_poses, "--jobs", "2", *extra],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=cli_env(),
-                         start_new_session=True)
+                         start_new_session=True, preexec_fn=ctrl_c_reaches_it)
     t0 = time.monotonic()
     while len(children(p.pid)) < 2:  # the two workers
         assert p.poll() is None and time.monotonic() - t0 < 30, p.communicate()
@@ -456,7 +521,7 @@ def test_ctrl_c_prints_one_line_and_exits_130(many_poses, tmp_path):
 
 def test_ctrl_c_one_process(many_poses, tmp_path):
     p = subprocess.Popen([os.path.join(VENV_BIN, "rotstar-detect"), many_poses, "-o", "c.vnl"], stderr=subprocess.PIPE,
-                         text=True, cwd=tmp_path, env=cli_env())
+                         text=True, cwd=tmp_path, env=cli_env(), preexec_fn=ctrl_c_reaches_it)
     t0 = time.monotonic()
     while "[1/" not in open(f"/proc/{p.pid}/cmdline").read() and time.monotonic() - t0 < 1.5:
         time.sleep(0.05)

@@ -97,10 +97,18 @@ def test_pattern_json_contract_roundtrip(small):
     assert d["screen"] == {"width": 800, "height": 600, "pixel_pitch_m": small.pixel_pitch_m}
     assert d["grid"]["nx"] == small.nx and d["grid"]["origin"] == list(small.origin)
     kinds = [f["kind"] for f in d["frames"]]
-    assert kinds == ["rotstar"] * 8 + ["checkerboard"]
+    assert kinds == ["rotstar"] * 8 + ["identity"] * 10 + ["checkerboard"]  # 6x4 corners: 10 identity frames
     assert [f["band"] for f in d["frames"][:3]] == ["white", "black", "white"]
     assert d["frames"][3]["angle_rad"] == pytest.approx(3 * math.pi / 16)
+    ids = d["frames"][8:18]
+    assert [f["file"] for f in ids] == [f"identity_{b:02d}.png" for b in range(10)]
+    assert [f["index"] for f in ids] == list(range(10)) and all("bit" in f["encodes"] for f in ids)
+    assert d["identity"]["frames"] == 10 and len(d["identity"]["codewords"]) == 24
     assert layout_from_dict(d) == small
+    # without identity frames: as before them
+    plain = json.loads(make_layout(screen=(800, 600), pitch=100, band=24, identity=False).to_json())
+    assert [f["kind"] for f in plain["frames"]] == ["rotstar"] * 8 + ["checkerboard"] and "identity" not in plain
+    assert not layout_from_dict(plain).identity and layout_from_dict(plain).identity_code is None
     bp = small.board_points()
     assert bp[0, 1].tolist() == pytest.approx([small.spacing_m, 0, 0])
     assert bp[1, 0].tolist() == pytest.approx([0, small.spacing_m, 0])
@@ -126,10 +134,33 @@ def test_cli_writes_sequence(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "--object-spacing" in r.stderr and "--object-width-n 6" in r.stderr and "--object-height-n 4" in r.stderr
+    assert "8 rotating-star frames, 10 identity frames, the checkerboard" in r.stderr
     d = json.loads((out / "pattern.json").read_text())
+    layout = layout_from_dict(d)
+    code = layout.identity_code
+    c = layout.corner_screen_xy().astype(int)
     for f in d["frames"]:
         img = cv2.imread(str(out / f["file"]), cv2.IMREAD_UNCHANGED)
         assert img.shape == (600, 800) and img.dtype == np.uint8
+        if f["kind"] == "identity":  # every element's square white where its codeword has a 1
+            assert np.array_equal(img[c[..., 1] + 5, c[..., 0] + 5] == 255, code.frame_bits(f["index"]) == 1)
+    assert sorted(p.name for p in out.glob("identity_*.png")) == [f"identity_{b:02d}.png" for b in range(10)]
+    # --no-identity: the sequence of before
+    lean = tmp_path / "lean"
+    r = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(lean),
+                        "--screen", "800x600", "--pitch", "100", "--band", "24", "--no-identity"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "no identity frames" in r.stderr and not list(lean.glob("identity_*"))
+    assert [f["kind"] for f in json.loads((lean / "pattern.json").read_text())["frames"]] == \
+        ["rotstar"] * 8 + ["checkerboard"]
+    help_text = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--help"],
+                               capture_output=True, text=True).stdout
+    assert "--no-identity" in help_text and "partly out of view" in " ".join(help_text.split())
+    # a grid too large for the code: one line, the way out named
+    big = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(tmp_path / "big"),
+                          "--screen", "8000x6000", "--pitch", "40", "--band", "10"], capture_output=True, text=True)
+    assert big.returncode == 2 and big.stderr.strip().count("\n") == 0 and "add --no-identity" in big.stderr
     bad = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(out), "--pitch", "99"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "even" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1

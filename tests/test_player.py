@@ -1,8 +1,9 @@
 """player.html in a real browser: Debian's chromium, headless, at devicePixelRatio 1 and 2
 
-Every loop entry of the player, screenshotted through the DevTools protocol
-(over --remote-debugging-pipe, a minimal client below), must equal its PNG
-pixel for pixel; the check screen's 1-px stripes must be exact; the warning
+Every loop entry of the player (the default sequence: the start marker, 8
+rotating-star frames, 13 identity frames, the checkerboard), screenshotted
+through the DevTools protocol (over --remote-debugging-pipe, a minimal client
+below), must equal its PNG pixel for pixel; the check screen's 1-px stripes must be exact; the warning
 must appear when the page cannot map one pattern pixel to one device pixel.
 Skipped, with the reason, where /usr/bin/chromium is absent (Debian package
 `chromium`, installed by the Makefile's test set-up).
@@ -235,7 +236,9 @@ def test_player_config_embeds_the_loop(ipad):
     cfg = json.loads(html.split('<script id="rotstar-config" type="application/json">')[1].split("</script>")[0])
     assert (cfg["width"], cfg["height"]) == (2360, 1640)
     assert [e["file"] for e in cfg["loop"]] == [None] + [f["file"] for f in d["frames"]]
-    assert cfg["loop"][0]["kind"] == "start-marker"
+    # the default sequence: the start marker, 8 rotating-star frames, 13 identity frames, the checkerboard
+    assert [e["kind"] for e in cfg["loop"]] == ["start-marker"] + ["rotstar"] * 8 + ["identity"] * 13 + ["checkerboard"]
+    assert cfg["loop"][9]["file"] == "identity_00.png"
     png = base64.b64decode(cfg["loop"][1]["src"].split(",", 1)[1])
     assert png == (ipad / d["frames"][0]["file"]).read_bytes()
     with pytest.raises(ValueError, match="no PNG"):
@@ -265,6 +268,7 @@ def test_frames_pixel_exact(ipad, browsers, dpr):
     st = b.load((ipad / "player.html").as_uri())
     assert st["mode"] == "check" and st["ok"], st["problems"]
     assert st["dpr"] == dpr and st["page"] == [W, H]
+    assert len(want) == st["entries"] == 23 and st["kinds"].count("identity") == 13
     for k, img in enumerate(want):
         assert b.evaluate(f"rotstar.show({k})")
         assert_gray_equal(b.screenshot(), img, f"DPR {dpr}, loop entry {k} ({st['files'][k]})")

@@ -306,9 +306,14 @@ def test_write_dataset_loads_and_truth_roundtrips(tmp_path, pinhole, frames):
     for name in ds.list_poses(seq):
         pose = ds.load_pose(seq, name, layout)
         assert pose.rotstar.shape == (8, 400, 640) and pose.checkerboard.shape == (400, 640)
+        assert pose.identity.shape == (10, 400, 640)  # the default sequence: 10 identity frames for 6x4 corners
         assert pose.full_scale == 65535.0
         # the board is bright where the truth says, the room is dark
         c = truth.corners[name]
+        # the identity frames, read at the true corners (the centres of the elements), name every element
+        xy = np.round(c.reshape(-1, 2)).astype(int)
+        index, _ = layout.identity_code.decode(pose.identity[:, xy[:, 1], xy[:, 0]].T)
+        assert index.tolist() == list(range(LAYOUT.nx * LAYOUT.ny))
         assert pose.checkerboard.max() > 0.8 * 65535
         assert np.median(pose.rotstar[0][:5, :5]) < 0.06 * 65535
         assert np.all((c >= 0) & (c <= (639, 399)))
@@ -442,6 +447,14 @@ def test_cli(tmp_path, capsys):
         main(["--help"])
     assert e.value.code == 0
     assert "--supersample" in capsys.readouterr().out
+    # --no-identity: the sequence without identity frames, in the dataset's pattern.json and in every pose
+    lean = str(tmp_path / "lean")
+    assert main(["--out", lean, "--pattern", str(pat), "--camera", "pinhole-small", "--poses", "1", "--no-identity"]) == 0
+    assert "(9 frames each)" in capsys.readouterr().err
+    d, layout = ds.read_pattern(lean)
+    assert not layout.identity and "identity" not in d and [f["kind"] for f in d["frames"]].count("identity") == 0
+    assert sorted(os.listdir(os.path.join(lean, "pose000"))) == sorted(f["file"] for f in layout.frames())
+    assert ds.load_pose(lean, "pose000", layout).identity is None
 
 
 def test_png_frames_decode_display(tmp_path, frames):

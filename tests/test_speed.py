@@ -23,6 +23,7 @@ def test_measure_speed_on_two_poses(d435_seq, tmp_path):
     assert all(p.decode_s > 0 and p.detect_s > 0 for p in r.poses)
     assert r.n_images == 2 * len(d435_seq.layout.frames())  # 8 rotating-star, the identity frames, checkerboard
     assert all(p.detect_plain_s > 0 for p in r.poses) and r.identity_share is not None  # with and without them
+    assert len(d435_seq.layout.frames()) == 22
     # the command did everything the in-process calls did, and started up
     assert r.command_s > 0 and r.startup_s >= 0
     assert r.ratio_with_startup >= r.ratio
@@ -60,5 +61,12 @@ def test_write_dataset_round_trip(tmp_path):
     np.testing.assert_array_equal(p.identity, identity)
     np.testing.assert_array_equal(p.checkerboard, np.round(checker))
     assert p.full_scale == 65535.0
-    with pytest.raises(ValueError, match="identity frames"):
-        speed.write_dataset(str(tmp_path / "seq2"), layout, [(frames, checker, None)], bits=16)
+    # captures without identity frames (the benchmark's): a dataset whose pattern.json lists none
+    seq = speed.write_dataset(str(tmp_path / "lean"), layout, [(frames, checker)], bits=8)
+    d, lean = dataset.read_pattern(seq)
+    assert not lean.identity and "identity" not in d
+    p = dataset.load_pose(seq, "pose000", lean)
+    assert p.identity is None and p.full_scale == 255.0
+    np.testing.assert_array_equal(p.rotstar, np.clip(frames, 0, 255))
+    with pytest.raises(ValueError, match="3 identity frames, the layout has 10"):
+        speed.write_dataset(str(tmp_path / "bad"), layout, [(frames, checker, identity[:3])], bits=16)

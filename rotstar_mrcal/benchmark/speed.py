@@ -324,19 +324,23 @@ def profile_table(entries: list[dict]) -> str:
 
 
 def write_dataset(folder: str, layout, poses: list[tuple], bits: int) -> str:
-    """A dataset folder from in-memory captures: [(rotstar frames (8, H, W), checkerboard (H, W) or None,
-    identity frames (nidentity, H, W) or None)]
+    """A dataset folder from in-memory captures: [(rotstar (8, H, W), checkerboard (H, W) or None[, identity])]
 
-    Frames are written as 8- or 16-bit PNGs (values rounded and clipped), one
-    folder per pose named pose000, pose001, ... A layout with identity frames
-    needs them (ValueError otherwise: the dataset would be incomplete).
+    identity: the identity frames (n, H, W) of a pose, or None. When a pose
+    has none, the dataset's pattern.json lists none (the layout without
+    identity frames), so that every pose holds every frame it lists. Frames
+    are written as 8- or 16-bit PNGs (values rounded and clipped), one folder
+    per pose named pose000, pose001, ...
     """
     from .. import dataset
 
+    poses = [tuple(p) + (None,) * (3 - len(p)) for p in poses]
+    if any(p[2] is None for p in poses):
+        layout = dataclasses.replace(layout, identity=False)
     dtype, top = (np.uint8, 255) if bits == 8 else (np.uint16, 65535)
     names = {f["kind"]: f["file"] for f in layout.frames() if f["kind"] == "checkerboard"}
     rot = [f["file"] for f in layout.frames() if f["kind"] == "rotstar"]
-    ident = [f["file"] for f in layout.frames() if f["kind"] == "identity"]
+    ids = [f["file"] for f in layout.frames() if f["kind"] == "identity"]
     dataset.write_pattern(folder, layout)
 
     def q(a):
@@ -344,13 +348,12 @@ def write_dataset(folder: str, layout, poses: list[tuple], bits: int) -> str:
 
     for i, (frames, checker, identity) in enumerate(poses):
         imgs = {fn: q(f) for fn, f in zip(rot, frames)}
-        if ident:
-            if identity is None or len(identity) != len(ident):
-                raise ValueError(f"pose {i}: the layout has {len(ident)} identity frames, the capture "
-                                 f"{0 if identity is None else len(identity)}")
-            imgs.update({fn: q(f) for fn, f in zip(ident, identity)})
         if checker is not None and "checkerboard" in names:
             imgs[names["checkerboard"]] = q(checker)
+        if ids:
+            if len(identity) != len(ids):
+                raise ValueError(f"pose {i}: {len(identity)} identity frames, the layout has {len(ids)}")
+            imgs.update({fn: q(f) for fn, f in zip(ids, identity)})
         dataset.write_pose(folder, f"pose{i:03d}", imgs)
     return folder
 

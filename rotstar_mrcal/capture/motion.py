@@ -20,6 +20,16 @@ frames all have nearly the same mean, so levels alone cannot separate them;
 consecutive display frames differ everywhere on the board, so the difference
 spikes at every change and sits at the noise floor in between.
 
+Both are taken over the pixels the player changes (screen_pixels: those
+whose range over the recording is a good part of the largest range), not
+over the whole image: a board far from the camera covers a few per cent of
+the image, and averaged over the whole image the change between two identity
+frames (about half of the elements flip, a quarter of the board's area) sinks
+into the noise of the room around the screen (a D435 with the default board
+at 0.6 m: barely above segmentation's threshold; at 0.9 m below it). Over
+the screen's pixels it is many times the noise at any distance
+(tests/test_segment.py, the board's corners on 1 % of the image).
+
 image_shift measures how far the image moved between two (averaged)
 frames of the same display frame: one Lucas-Kanade step for a translation
 plus a gain and an offset, solved by least squares on the smoothed image.
@@ -44,11 +54,50 @@ def downsample(img: np.ndarray, step: int) -> np.ndarray:
     return cv2.resize(f[: H - H % step, : W - W % step], (W // step, H // step), interpolation=cv2.INTER_AREA)
 
 
-def difference_signal(frames, full_scale: float, step: int = 4) -> tuple[np.ndarray, np.ndarray]:
+def screen_pixels(frames, full_scale: float, step: int = 4, fraction: float = 0.25,
+                  min_pixels: int = 64) -> np.ndarray | None:
+    """(H // step, W // step) bool: the downsampled pixels the player changes, or None (all of them)
+
+    A pixel belongs to the screen when its range over the recording (max -
+    min) is at least `fraction` of the largest range (the 99th percentile,
+    so that a few hot pixels do not set it). The room around a still screen
+    only shows noise; the screen goes from the black start marker to its
+    brightest frame. None when fewer than min_pixels qualify, or nearly all
+    do (a recording of noise alone): then the whole image is used.
+
+    SYNOPSIS
+
+        >>> rng = np.random.default_rng(0)
+        >>> f = 100 + rng.normal(0, 2, (6, 100, 100))       # the room: noise
+        >>> f[::2, 20:60, 40:80] += 5000                    # the screen flips in a 40 x 40 patch
+        >>> m = screen_pixels(f, 65535)
+        >>> m.shape, int(m.sum()), bool(m[10, 15]), bool(m[0, 0])
+        ((25, 25), 100, True, False)
+    """
+    lo = hi = None
+    for t in range(len(frames)):
+        cur = downsample(frames[t], step)
+        if lo is None:
+            lo, hi = cur.copy(), cur.copy()
+        else:
+            np.minimum(lo, cur, out=lo)
+            np.maximum(hi, cur, out=hi)
+    if lo is None:
+        return None
+    span = hi - lo
+    mask = span >= fraction * float(np.percentile(span, 99))
+    if mask.sum() < min_pixels or mask.mean() > 0.95:
+        return None
+    return mask
+
+
+def difference_signal(frames, full_scale: float, step: int = 4,
+                      mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(d, level): d[t] = mean |f_t - f_(t-1)| / full_scale (d[0] = NaN), level[t] = mean f_t / full_scale
 
     frames: anything indexable by frame number giving (H, W) arrays (an
-    array, a np.memmap, a lazy reader), read once, in order.
+    array, a np.memmap, a lazy reader), read once, in order. mask: the
+    downsampled pixels to average over (screen_pixels); None: all.
     """
     n = len(frames)
     d = np.full(n, np.nan)
@@ -56,6 +105,8 @@ def difference_signal(frames, full_scale: float, step: int = 4) -> tuple[np.ndar
     prev = None
     for t in range(n):
         cur = downsample(frames[t], step)
+        if mask is not None:
+            cur = cur[mask]
         level[t] = float(cur.mean()) / full_scale
         if prev is not None:
             d[t] = float(np.mean(np.abs(cur - prev))) / full_scale
@@ -63,7 +114,7 @@ def difference_signal(frames, full_scale: float, step: int = 4) -> tuple[np.ndar
     return d, level
 
 
-def noise_floor(frame: np.ndarray, full_scale: float, step: int = 4) -> float:
+def noise_floor(frame: np.ndarray, full_scale: float, step: int = 4, mask: np.ndarray | None = None) -> float:
     """What difference_signal reads between two frames of a still view: the sensor noise alone
 
     The noise sigma comes from the frame itself: the median absolute
@@ -71,6 +122,8 @@ def noise_floor(frame: np.ndarray, full_scale: float, step: int = 4) -> float:
     0.6745 * sqrt(2) sigma, with sigma at least the quantisation noise
     (0.29 of a code). Two step x step block means then differ by
     sqrt(2/pi) sqrt(2) sigma / step = 1.128 sigma / step on average.
+    mask: the downsampled pixels difference_signal averages over (the
+    noise of a bright screen is not that of a dark room); None: all.
 
     SYNOPSIS
 
@@ -82,7 +135,14 @@ def noise_floor(frame: np.ndarray, full_scale: float, step: int = 4) -> float:
         1.0
     """
     f = np.asarray(frame, np.float32)
-    sigma = float(np.median(np.abs(np.diff(f, axis=1)))) / (0.6745 * np.sqrt(2))
+    diffs = np.abs(np.diff(f, axis=1))
+    if mask is not None:
+        s = max(step, 1)
+        full = np.repeat(np.repeat(mask, s, axis=0), s, axis=1)
+        pairs = full[:, 1:] & full[:, :-1]
+        inside = diffs[: pairs.shape[0], : pairs.shape[1]][pairs]
+        diffs = inside if inside.size >= 100 else diffs
+    sigma = float(np.median(diffs)) / (0.6745 * np.sqrt(2))
     sigma = max(sigma, 0.29)
     return 1.128 * sigma / max(step, 1) / full_scale
 

@@ -16,6 +16,9 @@ that carries fewer bits in the low end of the word (the D435's Y16 may hold
 Scaling changes no geometry: the detector only uses full scale to recognise
 dark and saturated frames.
 
+Every frame of pattern.json is written, the identity frames included (a
+pattern without them gives a pose without them, as before).
+
 Beside the frames, <pose>/segment.json records which camera frames were
 averaged for every file, the threshold, every loop's verdict and the scale.
 The dataset's pattern.json is a copy of the one the pattern was made with; a
@@ -118,10 +121,10 @@ def quick_check(seg: Segmentation, layout: Layout, pattern: dict, full_scale: fl
     full_scale: of the averages as they are, in recorded units (before
     encode_average's scaling): the recording's full scale / value_scale.
     """
-    rot = [f["file"] for f in pattern["frames"] if f["kind"] == "rotstar"]
-    cb = [f["file"] for f in pattern["frames"] if f["kind"] == "checkerboard"]
-    ids = [f["file"] for f in pattern["frames"] if f["kind"] == "identity"]
-    frames = np.stack([seg.images[f] for f in rot]).astype(np.float32)
-    checker = seg.images[cb[0]].astype(np.float32) if cb else None
-    identity = np.stack([seg.images[f] for f in ids]).astype(np.float32) if ids else None
-    return detect_pose(frames, layout, full_scale=full_scale, checkerboard=checker, identity=identity)
+    def stack(kind):
+        files = [f["file"] for f in pattern["frames"] if f["kind"] == kind]
+        return np.stack([seg.images[f] for f in files]).astype(np.float32) if files else None
+
+    cb = stack("checkerboard")
+    return detect_pose(stack("rotstar"), layout, full_scale=full_scale, checkerboard=None if cb is None else cb[0],
+                       identity=stack("identity"))

@@ -15,16 +15,24 @@ loop. A camera recording it sees stable stretches separated by one or two
 transition frames (the display changes during the exposure, row by row as
 the panel scans out). Segmentation, step by step:
 
-1. the difference signal d[t] = mean |f_t - f_(t-1)| over 4x-downsampled
-   frames (motion.difference_signal), and each frame's mean level;
+1. the pixels the player changes (motion.screen_pixels: the screen, not the
+   room around it), then over them the difference signal d[t] = mean
+   |f_t - f_(t-1)| of 4x-downsampled frames (motion.difference_signal) and
+   each frame's mean level. Over the screen alone, a change flips a large
+   part of the pixels averaged however small the board is in the image: the
+   identity frames, which differ in about half of the elements (a quarter of
+   the board's area, about 0.6 of what the band flip between rotating-star
+   frames changes), stay far above the threshold;
 2. a robust threshold: tau = median(d) + max(k * 1.4826 * MAD(d),
    (ratio - 1) * median(d)) (the stable frames are the majority, so median
    and MAD describe the noise floor);
 3. stretches: maximal runs of frames joined by d < tau, at least min_len
    frames long; shorter runs (transition frames) are dropped. Inside the
    stretches d must be near the sensor noise (motion.noise_floor, estimated
-   from a frame itself): a moving view raises the median, and with it the
-   threshold, so this is what recognises it;
+   from a frame itself over the same pixels; edges on the screen make it an
+   overestimate when the board is small, up to about 2x): a moving view
+   raises the median, and with it the threshold, so this is what
+   recognises it;
 4. each stretch's core: `guard` frames dropped at each end, then the middle
    `average` frames (the paper averages 8); its level is the core's mean;
 5. start markers: the darkest stretches, split from the rest at the widest
@@ -32,11 +40,20 @@ the panel scans out). Segmentation, step by step:
 6. loops: a marker followed by exactly len(frames) stretches and then the
    next marker (or the end of the recording). Fewer means a display frame
    was dropped, more means something flickered: that loop is rejected with
-   the reason and another loop is used;
+   the reason and another loop is used. Files are assigned in the order of
+   time, so two display frames merged into one stretch leave the loop a
+   frame short and reject it rather than shift the files after them (only a
+   merge and a split in the same loop could shift them: over the rotating-
+   star frames the level steps of 7 catch that; over the identity frames
+   the detector's reading does, as a missing or repeated frame changes the
+   number of white frames in most elements);
 7. order check against pattern.json: the loop's levels must follow the
    expected levels (display/loop.py): correlation >= min_correlation, and
    every large expected step between neighbours (the border band flips
-   white/black each frame) must have the recorded sign;
+   white/black each frame) must have the recorded sign. The identity frames'
+   levels differ by a few elements' area (and by which elements are in
+   view), so their steps are never "large": they count in the correlation
+   only, where the band flips and the black start marker dominate;
 8. motion: in every stretch, the image shift between the first and the
    second half of its stable frames (motion.image_shift), per frame; the
    mean over the loop's stretches (noise averages out, a steady drift adds
@@ -61,7 +78,7 @@ import numpy as np
 
 from ..display.loop import expected_levels, player_loop
 from ..pattern.layout import Layout
-from .motion import difference_signal, image_shift, noise_floor
+from .motion import difference_signal, image_shift, noise_floor, screen_pixels
 
 
 class SegmentError(Exception):
@@ -118,6 +135,7 @@ class Segmentation:
     d: np.ndarray  # the difference signal
     level: np.ndarray  # per-frame mean level
     tau: float
+    mask: np.ndarray | None = None  # the downsampled pixels d and level average over (None: all)
 
     @property
     def loop(self) -> LoopVerdict:
@@ -285,7 +303,8 @@ def segment(frames, frames_list: list[dict], layout: Layout, full_scale: float,
     if len(frames) < need:
         raise SegmentError(f"the recording is too short: {len(frames)} frame(s), need at least {need} (one whole "
                            f"loop of the player: {len(loop)} entries of >= {opts.min_len} frames each)")
-    d, level = difference_signal(frames, full_scale, opts.step)
+    mask = screen_pixels(frames, full_scale, opts.step)
+    d, level = difference_signal(frames, full_scale, opts.step, mask)
     tau = threshold(d, opts.k, opts.ratio)
     runs = stable_runs(d, tau, opts.min_len)
     still = sum(b - a for a, b in runs) / len(frames)
@@ -294,7 +313,7 @@ def segment(frames, frames_list: list[dict], layout: Layout, full_scale: float,
                            f">= {opts.min_len} frames (camera or screen moving, or the player's hold too short "
                            f"for this frame rate)")
     inside = np.concatenate([d[a + 1 : b] for a, b in runs]) if runs else np.array([])
-    floor = noise_floor(frames[len(frames) // 2], full_scale, opts.step)
+    floor = noise_floor(frames[len(frames) // 2], full_scale, opts.step, mask)
     if len(inside) and np.median(inside) > opts.max_jitter * floor:
         raise SegmentError(f"the view is not still: consecutive frames differ by {np.median(inside) / floor:.0f}x "
                            f"the sensor noise even between the player's changes (camera or screen moving, or a "
@@ -320,4 +339,4 @@ def segment(frames, frames_list: list[dict], layout: Layout, full_scale: float,
         a, b = stretches[si].core
         images[entry["file"]] = _mean(frames, a, b)
         ranges[entry["file"]] = (a, b)
-    return Segmentation(images, ranges, stretches, markers, verdicts, chosen, d, level, tau)
+    return Segmentation(images, ranges, stretches, markers, verdicts, chosen, d, level, tau, mask)

@@ -9,8 +9,8 @@ SYNOPSIS
     ds.display.summary()                  # the screen's per-frame offsets over the poses so far
 
 rotstar-capture drives these for every pose and exposure; nothing here
-prints. A recording goes to a memory map (275 Y16 frames of a D435 are
-560 MB), is segmented as rotstar-segment does (capture.segment), detected at
+prints. A recording goes to a memory map (2.2 loops of the default sequence
+with its identity frames, 633 Y16 frames of a D435, are 1.3 GB), is segmented as rotstar-segment does (capture.segment), detected at
 once (capture.pose.quick_check), written as a pose folder of the dataset, and
 counted into the coverage of the imager and the display offsets of the
 session (detect.display: a pose whose frames moved against the others'
@@ -31,7 +31,7 @@ from ..atomic import atomic_path
 from ..detect.display import DisplayCheck, dataset_offsets
 from ..vnl import mrcal_keeps, mrcal_min_corners
 from . import coverage
-from .motion import difference_signal, downsample, is_still
+from .motion import difference_signal, downsample, is_still, screen_pixels
 from .pose import quick_check, value_scale, write_segmented
 from .segment import Options, SegmentError, segment, threshold
 from .source import FrameSource, record
@@ -179,8 +179,8 @@ def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frame
         seg = segment(frames, pattern["frames"], layout, full_scale, so)
         ds.tau = seg.tau
     except SegmentError as e:
-        d, _ = difference_signal(frames, full_scale, so.step)
-        ds.tau = threshold(d, so.k, so.ratio)
+        d, _ = difference_signal(frames, full_scale, so.step, screen_pixels(frames, full_scale, so.step))
+        ds.tau = threshold(d, so.k, so.ratio)  # as segment() would have set it
         entry.update(ok=False, error=str(e))
         return PoseOutcome(False, [f"{ds.what(pose)}: not usable: {e}"])
     messages = []

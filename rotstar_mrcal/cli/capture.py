@@ -23,8 +23,9 @@ from .common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_INTERRUPTED, atomic_write
 from .segment_args import add_segment_options, options_from
 
 DESCRIPTION = """\
-Record the rotating-star sequence that player.html loops on the screen, one
-camera pose at a time, and turn every recording into a dataset pose folder
+Record the display sequence that player.html loops on the screen (the
+rotating-star frames, the identity frames, the checkerboard), one camera
+pose at a time, and turn every recording into a dataset pose folder
 that rotstar-detect reads: per pose and per exposure, record at least one
 whole loop of the player, split it into the displayed frames (as
 rotstar-segment does), detect the board at once and say whether it was
@@ -54,7 +55,7 @@ examples:
   rotstar-capture --list                                   # first contact: nodes, formats, controls
   rotstar-capture --pattern pattern/ --out seq --exposure 2000,4000,8000
   rotstar-capture --pattern pattern/ --out seq --auto --poses 30
-  rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --frames 300
+  rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --frames 640
   rotstar-detect seq/exp4000us > corners.vnl
 
 """ + EXIT_CODES_HELP + " (a camera that cannot be opened or set: 1)\n"

@@ -19,10 +19,12 @@ DESCRIPTION = """\
 Write the rotating-star display sequence for one screen: NFRAMES frames in
 which every grid corner is the centre of a checkerboard corner turned by
 k*STEP in frame k, framed by border bands that are white in even frames and
-black in odd ones, then one plain checkerboard frame whose inner corners are
-the same screen points (the baseline). Also writes pattern.json, which
-rotstar-detect needs beside the recorded poses, and prints the mrcal object
-arguments on stderr.
+black in odd ones; then the identity frames, in which every element's square
+is white or black by one bit of its grid index (a constant-weight code: 13
+frames for 14x9 corners); then one plain checkerboard frame whose inner
+corners are the same screen points (the baseline). Also writes pattern.json,
+which rotstar-detect needs beside the recorded poses, and player.html, and
+prints the mrcal object arguments on stderr.
 
 Show the PNGs at exactly one image pixel per display pixel (no scaling, no
 smoothing). The defaults fit a 10.9-inch iPad Air or iPad 10 (2360x1640, 264 ppi, the paper's screen) filmed by
@@ -58,6 +60,11 @@ def parse_args(argv=None):
     p.add_argument("--frames", type=number_arg(int, 2, 64), default=8,
                    help="rotating-star frames, at least 2: the corners are where the turned frames agree (default 8)")
     p.add_argument("--step", type=_angle, default=math.pi / 16, help="rotation per frame, radians or pi/N (default pi/16)")
+    p.add_argument("--no-identity", dest="identity", action="store_false",
+                   help="leave out the identity frames. They let every corner name itself, so a board partly out "
+                        "of view (no orientation marker or outer band in sight) still gives correctly labelled "
+                        "corners; without them the whole board must be in view. They lengthen the sequence "
+                        "(13 more frames for 14x9 corners)")
     p.add_argument("--gamma", type=number_arg(float, 0.1, 10), default=2.2,
                    help="display gamma applied to the PNG values so that anti-aliased pixels emit the "
                         "right amount of light (default 2.2; 1 writes linear values)")
@@ -77,9 +84,9 @@ def _main(argv=None) -> int:
     pitch_m = a.pixel_pitch_mm / 1000 if a.pixel_pitch_mm else 0.0254 / a.ppi
     try:
         layout = make_layout(screen=a.screen, pixel_pitch_m=pitch_m, pitch=a.pitch, band=a.band,
-                             nframes=a.frames, step=a.step, nx=a.nx, ny=a.ny)
+                             nframes=a.frames, step=a.step, nx=a.nx, ny=a.ny, identity=a.identity)
     except ValueError as e:
-        fail(str(e))
+        fail(str(e).replace("leave the identity frames out", "add --no-identity"))
     check_output_path(a.out, folder=True)
     os.makedirs(a.out, exist_ok=True)
     frames = layout.frames()
@@ -97,8 +104,11 @@ def _main(argv=None) -> int:
         json.dump(d, fh, indent=2)
         fh.write("\n")
     say(f"wrote {write_player(a.out)}: open it on the screen, full screen (doc/capture.md)")
+    code = layout.identity_code
     say(f"{layout.nx}x{layout.ny} corners, pitch {layout.pitch} px = {layout.spacing_m * 1000:.4f} mm, "
-        f"marker element {layout.marker}; wrote {a.out}/pattern.json")
+        f"marker element {layout.marker}; {layout.nframes} rotating-star frames, "
+        + (f"{code.nframes} identity frames, " if code else "no identity frames, ")
+        + f"the checkerboard; wrote {a.out}/pattern.json")
     say("mrcal object arguments: " + " ".join(layout.mrcal_object_args()))
     return 0
 

@@ -4,8 +4,9 @@ SYNOPSIS
 
     rotstar-simulate --out seq/ --camera d435 --poses 24 --seed 0 --jobs 2
 
-Writes seq/pattern.json, seq/poseNNN/*.png (every frame of the pattern, as a
-camera at a random pose sees the screen), seq/truth.cameramodel and
+Writes seq/pattern.json, seq/poseNNN/*.png (every frame of the pattern, the
+identity frames included unless --no-identity, as a camera at a random pose
+sees the screen), seq/truth.cameramodel and
 seq/truth.json (the poses and the true corner projections). Progress goes to
 stderr; stdout gets only the output folder, for piping.
 """
@@ -13,6 +14,7 @@ stderr; stdout gets only the output folder, for piping.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import sys
@@ -44,6 +46,14 @@ def parse_args(argv=None) -> argparse.Namespace:
         metavar="DIR",
         help="folder with the pattern.json (as rotstar-pattern writes it) describing the screen; "
         "default: make_layout() defaults (2360x1640 screen at 264 dpi)",
+    )
+    p.add_argument(
+        "--no-identity",
+        dest="identity",
+        action="store_false",
+        help="leave out the identity frames (each element's index, shown after the rotating-star frames) and "
+        "render the sequence without them, as rotstar-pattern --no-identity writes it; with --pattern, the "
+        "dataset's pattern.json then lists no identity frames either",
     )
     p.add_argument(
         "--screen-png",
@@ -170,8 +180,10 @@ def _main(argv=None) -> int:
     try:
         if args.pattern:
             _, layout = read_pattern(args.pattern)
+            if not args.identity:
+                layout = dataclasses.replace(layout, identity=False)
         else:
-            layout = make_layout()
+            layout = make_layout(identity=args.identity)
         model, camera = load_camera(args.camera)
         check_output_path(args.out, folder=True)
         if args.pattern and os.path.realpath(args.out) == os.path.realpath(
@@ -185,7 +197,7 @@ def _main(argv=None) -> int:
         frames = png_frames(args.pattern, layout) if args.screen_png else exact_frames(layout)
         distance = tuple(args.distance) if args.distance else default_distance_range(model, layout)
         say(
-            f"{args.poses} poses of a {layout.nx}x{layout.ny} grid, camera {camera} "
+            f"{args.poses} poses of a {layout.nx}x{layout.ny} grid ({len(frames)} frames each), camera {camera} "
             f"{model.imagersize()[0]}x{model.imagersize()[1]}, {distance[0]:.3g}-{distance[1]:.3g} m"
         )
         rts = random_poses(

@@ -86,10 +86,10 @@ def capture_pose(job: Job) -> PoseResult:
     t0 = time.perf_counter()
     layout, model = _W["layout"], _W["model"]
     kw = dict(supersample=2, psf=_W["psf"], rays=_W["rays"])
-    E = simulate.render_irradiance(_W["screen"], model, job.rt, **kw)  # the sequence (+ ChArUco)
+    E = simulate.render_irradiance(_W["screen"], model, job.rt, **kw)  # layout.frames() (+ the ChArUco board)
     Ech = E[-1] if job.charuco else None
     E = E[:-1] if job.charuco else E
-    n = layout.nframes
+    kinds = np.array([f["kind"] for f in layout.frames()])
     Es = simulate.render_irradiance(_W["screen_square"], model, job.rt_square, **kw)[0]
     pose = f"pose{job.index:03d}"
     results, crops = {}, {}
@@ -100,11 +100,12 @@ def capture_pose(job: Job) -> PoseResult:
         def expose(img):
             return simulate.expose(img, gain=gain, noise=NOISE, shot=SHOT, bits=16, rng=rng)
 
-        rot = expose(E[:n])
-        cb = averaged_captures(E[-1], expose, CAPTURES, roi=lit_box(E[-1]))
+        rot = expose(E[kinds == "rotstar"])
+        Ec = E[np.flatnonzero(kinds == "checkerboard")[0]]
+        cb = averaged_captures(Ec, expose, CAPTURES, roi=lit_box(Ec))
         sq = averaged_captures(Es, expose, CAPTURES, roi=lit_box(Es))
-        identity = expose(E[n:-1]) if len(E) > n + 1 else None
-        found = detect_methods(rot, layout, 65535.0, cb, job.methods, identity=identity)
+        ident = expose(E[kinds == "identity"]) if layout.identity else None  # (last: the others' noise as before)
+        found = detect_methods(rot, layout, 65535.0, cb, job.methods, identity=ident)
         results[label] = {m: (f.corners, f.weights, f.why) for m, f in found.items()}
         if job.charuco:
             c = detect_charuco(averaged_captures(Ech, expose, CAPTURES, roi=lit_box(Ech)), layout, 65535.0)
@@ -115,9 +116,10 @@ def capture_pose(job: Job) -> PoseResult:
         os.makedirs(sqdir, exist_ok=True)
         cv2.imwrite(os.path.join(sqdir, "checkerboard.png"), np.clip(np.round(sq / 257.0), 0, 255).astype(np.uint8))
         if job.keep_images:
-            seq = list(rot) + ([] if identity is None else list(identity)) + [np.round(cb).astype(np.uint16)]
+            imgs = {"rotstar": iter(rot), "identity": iter(() if ident is None else ident),
+                    "checkerboard": iter([np.round(cb).astype(np.uint16)])}
             dataset.write_pose(os.path.join(edir, job.group), pose,
-                               {f["file"]: img for f, img in zip(layout.frames(), seq)})
+                               {f["file"]: next(imgs[f["kind"]]) for f in layout.frames()})
         if job.index == 0:  # close-ups for the report: the corner nearest an image corner
             d = np.linalg.norm(truth - (0, 0), axis=-1)
             j, i = np.unravel_index(np.argmin(d), d.shape)

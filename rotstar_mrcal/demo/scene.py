@@ -113,7 +113,8 @@ def setup_notes(npose, reach) -> str:
     """The report's set-up section (Markdown)"""
     return f"""\
 Simulated Intel RealSense D435 infrared camera (1280x800 Y16, `OPENCV8` lens with fx = 640) looking at an
-iPad (2360x1640, 264 ppi) showing the rotating-star sequence (14 x 9 corners, 8 frames) and a checkerboard.
+iPad (2360x1640, 264 ppi) showing the rotating-star sequence (14 x 9 corners, 8 frames), the 13 identity
+frames and a checkerboard.
 The lens has a wavefront PSF (rotstar_mrcal.optics): coma growing with the field radius to {COMA_WAVES} waves
 at the image corners (a comet about {3 * 2 * 0.367 * COMA_WAVES:.1f} px long there; its centroid is kept on the
 chief ray, so the true model is where the light's centroid lands), field curvature ({FOCUS_WAVES} waves of
@@ -125,8 +126,8 @@ to 60 degrees (the paper: 10-degree steps), at three places in the field of view
 {npose['B']} in B). Group B is rolled by 30 degrees, turns about the other axis, is closer and spread wider:
 90% of its corners lie within {reach['B']:.0f} px of the image centre, against {reach['A']:.0f} px for A.
 Three exposures (gains 0.35, 0.7 and 1.4 of full scale for white; the last saturates the white).
-Each method detects its own corners on the same poses: rotstar on the 8 rotating-star frames (one capture
-each); the checkerboard methods on the checkerboard frame averaged over 8 captures; mrgingham on a square
+Each method detects its own corners on the same poses: rotstar on the 8 rotating-star frames and the 13
+identity frames (one capture each); the checkerboard methods on the checkerboard frame averaged over 8 captures; mrgingham on a square
 9 x 9 checkerboard seen from the same poses. Every corner set is calibrated with mrcal
 (`{LENSMODEL}`: the true lens has no rational terms, and the splined model needs more poses than a group
 has) on group A and on group B.

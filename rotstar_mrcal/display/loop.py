@@ -7,19 +7,26 @@ SYNOPSIS
     >>> from rotstar_mrcal.display.loop import player_loop, expected_levels
     >>> layout = make_layout(screen=(800, 600), pitch=100, band=24)
     >>> loop = player_loop(layout.frames())
-    >>> len(loop), loop[0]["kind"], loop[1]["file"], loop[-1]["file"]
-    (10, 'start-marker', 'rotstar_00.png', 'checkerboard.png')
+    >>> len(loop), loop[0]["kind"], loop[1]["file"], loop[9]["file"], loop[-1]["file"]
+    (20, 'start-marker', 'rotstar_00.png', 'identity_00.png', 'checkerboard.png')
     >>> np.round(expected_levels(layout, loop), 3)
     array([0.   , 0.631, 0.369, 0.631, 0.369, 0.631, 0.369, 0.631, 0.369,
-           0.625])
+           0.381, 0.357, 0.381, 0.357, 0.393, 0.357, 0.381, 0.357, 0.381,
+           0.345, 0.625])
+
+The start marker, the 8 rotating-star frames (band white, black, ...), the
+identity frames (6 x 4 grid: 10 frames; bands black, about half of the
+elements white, so their levels differ only by a few elements' area), then
+the checkerboard.
 
 This is the contract between the player (display/player.py) and
 segmentation (capture/segment.py). One loop entry is held for a number of
 display refreshes; the loop repeats forever. Entry 0, the start marker, is an
 all-black screen: the darkest thing the player shows, by a wide margin (every
-other frame is at least a third white), so segmentation finds it by its
-level alone and reads the order of the rest from it. pattern.json is not
-changed: the marker is not a dataset frame.
+other frame shows the grey background and a white band or about half of the
+elements white: more than a quarter of full white on the default screen), so
+segmentation finds it by its level alone and reads the order of the rest
+from it. pattern.json is not changed: the marker is not a dataset frame.
 
 expected_levels gives the mean linear luminance of each entry over the whole
 screen (what the screen emits; 0 black, 1 white). The camera sees a part of

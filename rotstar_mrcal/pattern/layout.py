@@ -249,6 +249,13 @@ def make_layout(
         raise ValueError(f"only {fit_x}x{fit_y} corners fit on a {W}x{H} screen at pitch {pitch}; need at least 3x3")
     if nx > fit_x or ny > fit_y:
         raise ValueError(f"{nx}x{ny} corners at pitch {pitch} do not fit on a {W}x{H} screen (at most {fit_x}x{fit_y})")
+    if identity:
+        from .identity import IdentityCode
+
+        try:
+            IdentityCode.for_grid(nx, ny)
+        except ValueError as e:
+            raise ValueError(f"{e}: leave the identity frames out, or use fewer corners") from None
     origin = ((W - (nx - 1) * pitch) // 2, (H - (ny - 1) * pitch) // 2)
     return Layout(
         screen_width=W,
@@ -328,7 +335,11 @@ def _check_identity(d: dict, nx: int, ny: int) -> bool:
     idx = [f.get("index") for f in d["frames"] if f["kind"] == "identity"]
     if not idx and "identity" not in d:
         return False
-    code = code_from_dict(d.get("identity"), nx, ny)
+    if "identity" not in d:
+        raise ValueError(f"identity missing: frames lists {len(idx)} identity frame(s), and their code is not described")
+    code = code_from_dict(d["identity"], nx, ny)
+    if not idx:
+        raise ValueError(f"frames: no identity frames, though the identity section describes {code.nframes}")
     if idx != list(range(code.nframes)):
         raise ValueError(f"frames: identity frames with indices {idx[:20]}; the {nx}x{ny} grid's code needs "
                          f"0..{code.nframes - 1} in order")

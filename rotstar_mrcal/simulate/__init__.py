@@ -12,7 +12,7 @@ SYNOPSIS
     >>> E = simulate.render_irradiance(screen, model, rt, supersample=4, psf=1.0)
     >>> img = simulate.expose(E, gain=0.9, noise=0.01, bits=16, rng=0)
     >>> img.shape, img.dtype
-    ((9, 400, 640), dtype('uint16'))
+    ((19, 400, 640), dtype('uint16'))
 
 Modules, one concept each:
 

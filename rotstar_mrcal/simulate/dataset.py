@@ -20,7 +20,8 @@ SYNOPSIS
 On disk (the layout of rotstar_mrcal.dataset, plus the truth):
 
     seq/pattern.json          write_pattern(seq, layout)
-    seq/poseNNN/<file>.png    every entry of layout.frames(), 8- or 16-bit
+    seq/poseNNN/<file>.png    every entry of layout.frames() (the identity frames
+                              too when the layout has them), 8- or 16-bit
     seq/truth.cameramodel     the true camera (mrcal's .write)
     seq/truth.json            per pose: rt_cam_board and the true corners
 
@@ -263,14 +264,17 @@ def displayed_poses(rt_cam_board, layout: Layout, display_offsets=None) -> np.nd
 
     A frame shown displaced by (du, dv) display pixels is the board moved by
     (du, dv) * pixel_pitch_m in its own plane. Offsets are taken relative to
-    their mean; frames after the rotating-star ones are shown at the mean.
+    their mean; the frames of other kinds (the identity frames, the
+    checkerboard) are shown at the mean.
 
         >>> from rotstar_mrcal.pattern.layout import make_layout
         >>> layout = make_layout(screen=(800, 600), pitch=100, band=24, pixel_pitch_m=0.001)
         >>> off = np.zeros((8, 2)); off[1] = (2, 0)
-        >>> rt = displayed_poses(np.zeros(6), layout, off)
+        >>> rt = displayed_poses(np.zeros(6), layout, off)   # 8 rotating-star, 10 identity frames, checkerboard
         >>> rt.shape, rt[1, 3:].round(5).tolist(), rt[0, 3:].round(5).tolist()
-        ((9, 6), [0.00175, 0.0, 0.0], [-0.00025, 0.0, 0.0])
+        ((19, 6), [0.00175, 0.0, 0.0], [-0.00025, 0.0, 0.0])
+        >>> bool(np.all(rt[8:] == 0))
+        True
     """
     rt = np.asarray(rt_cam_board, float)
     if display_offsets is None:

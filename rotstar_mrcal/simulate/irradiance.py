@@ -13,7 +13,7 @@ SYNOPSIS
     >>> rt = np.array((0, 0, 0, -0.0385, -0.0289, 0.12))      # head-on, 12 cm away
     >>> img = render_irradiance(screen, model, rt, supersample=4, psf=1.0)
     >>> img.shape, round(float(img[0, 0, 0]), 3)              # corner pixel sees the room
-    ((9, 400, 640), 0.02)
+    ((19, 400, 640), 0.02)
 
 For every camera pixel, s x s sub-pixels are traced: the sub-pixel rays
 (interpolated from the per-camera ray cache, camera.camera_rays) are

@@ -6,11 +6,11 @@ SYNOPSIS
     >>> from rotstar_mrcal.simulate.screen import exact_frames, make_screen, board_to_screen
     >>> layout = make_layout(screen=(800, 600), pitch=100, band=24)
     >>> frames = exact_frames(layout)                  # every entry of layout.frames()
-    >>> frames.shape, frames.dtype
-    ((9, 600, 800), dtype('float32'))
+    >>> frames.shape, frames.dtype                     # 8 rotating-star, 10 identity, the checkerboard
+    ((19, 600, 800), dtype('float32'))
     >>> screen = make_screen(frames, layout, room=0.02)
     >>> screen.nframes, screen.sat.shape
-    (9, (601, 801, 9))
+    (19, (601, 801, 19))
     >>> board_to_screen(layout.board_points()[0, 1], layout)   # corner (1, 0)
     array([250., 150.])
 
@@ -24,7 +24,8 @@ float64, laid out (Hs+1, Ws+1, nframes) so that one look-up reads all frames.
 Bilinear interpolation of a summed-area table of a piecewise-constant image is
 its exact integral, so the renderer gets the exact mean luminance over any
 axis-aligned box on the screen with 16 look-ups. Memory: 8 * nframes bytes per
-display pixel (280 MB for 9 frames of a 2360x1640 screen).
+display pixel (680 MB for the 22 frames of the default sequence on a 2360x1640
+screen, 280 MB for the 9 without identity frames).
 """
 
 from __future__ import annotations
