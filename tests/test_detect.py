@@ -22,7 +22,8 @@ from rotstar_mrcal import dataset as ds
 from rotstar_mrcal.detect.boundaries import element_boundaries
 from rotstar_mrcal.detect.indexing import (GridError, adjacency, contact_graph, drop_crossing_links, grid_labels,
                                            grid_labels_grown, grid_symmetries, orient)
-from rotstar_mrcal.detect.pipeline import WINDOW_FRACTION, detect_pose
+from rotstar_mrcal.detect.labelled import WINDOW_FRACTION
+from rotstar_mrcal.detect.pipeline import detect_pose
 from rotstar_mrcal.detect.refine import symmetric_refine
 from rotstar_mrcal.detect.response import binarize, response_map
 from rotstar_mrcal.detect.rough import rough_corners

@@ -220,9 +220,10 @@ def test_bad_dataset_exit_status_and_summary(bad_run, bad_seq):
 
 @pytest.mark.parametrize("pose", [p for p, why in EXPECT.items() if why])
 def test_bad_pose_gets_one_line_with_its_reason(bad_run, pose):
-    lines = pose_lines(bad_run.stderr, pose)
-    assert len(lines) == 1, lines
-    assert "skipped" in lines[0]
+    # skipped while detected, or after all poses by the dataset's motion check (a camera that drifted
+    # moves every frame alike, as a screen's display offsets do within one pose)
+    lines = [line for line in pose_lines(bad_run.stderr, pose) if "skipped" in line]
+    assert len(lines) == 1, pose_lines(bad_run.stderr, pose)
     assert re.search(EXPECT[pose], lines[0]), lines[0]
 
 
@@ -250,7 +251,8 @@ def test_every_board_written_agrees_with_truth(bad_run, bad_seq, d435_seq):
 
 
 def test_stderr_has_no_stray_lines(bad_run):
-    known = re.compile(r"^\[\d+/\d+\] \S+: |^rotstar-detect: |^next, calibrate with:$|^  mrcal-calibrate-cameras ")
+    known = re.compile(r"^\[\d+/\d+\] \S+: |^\S+: skipped: |^rotstar-detect: |^next, calibrate with:$"
+                       r"|^  mrcal-calibrate-cameras ")
     stray = [line for line in bad_run.stderr.splitlines() if not known.search(line)]
     assert stray == []
 

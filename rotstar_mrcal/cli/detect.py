@@ -8,7 +8,7 @@ import sys
 
 from .. import dataset
 from ..detect.display import MAX_MOTION
-from ..detect.pipeline import MIN_WINDOW
+from ..detect.labelled import MIN_WINDOW
 from ..methods import REFINERS
 from ..detect.run import detect_dataset
 from ..focal import estimate_focal

@@ -48,7 +48,7 @@ from ..methods import refiner
 from ..pattern.layout import Layout
 from .consistency import refined_consistency
 from .display import MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian
-from .labelled import MIN_WINDOW, WINDOW_FRACTION, by_graph, by_identity  # noqa: F401 (re-exported)
+from .labelled import by_graph, by_identity
 from .refine import refine_each_frame, symmetric_refine
 from .sequence import check_band_parity
 
