@@ -43,7 +43,7 @@ import math
 import mrcal
 import numpy as np
 
-from ..detect.pipeline import MIN_WINDOW, WINDOW_FRACTION
+from ..detect.labelled import MIN_WINDOW, WINDOW_FRACTION
 from ..pattern.layout import Layout
 
 POINTS_PER_SIDE = 8  # points per side of an element's square, projected to find its inscribed square
