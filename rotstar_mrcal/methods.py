@@ -130,6 +130,8 @@ class PoseImages:
     frames: np.ndarray | None = None  # (nframes, H, W) rotating-star frames
     identity: np.ndarray | None = None  # (nidentity, H, W) identity frames, when the pattern has them
     checkerboard: np.ndarray | None = None  # (H, W) the checkerboard frame (float: an average)
+    phase: np.ndarray | None = None  # (2, 4, H, W) the phase shifts along x then y, steps 0..3
+    star: np.ndarray | None = None  # (H, W) the star frame
     png: str | None = None  # the board as an image file, for methods that are programs (mrgingham)
     start: np.ndarray | None = None  # (ny, nx, 2) start of start='rotstar' methods (default: rotstar's corners)
     start_window: np.ndarray | None = None  # (ny, nx) their half-windows, px (default: rotstar's windows)
