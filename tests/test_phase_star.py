@@ -68,6 +68,11 @@ def test_phase_saturation_rejects_corners_with_the_reason(paper_seq):
     assert np.isnan(r.corners[on_left]).all() and set(r.reason[on_left]) == {"saturated: a sample of the window at full scale"}
     assert np.isfinite(r.corners[~on_left]).all() and set(r.reason[~on_left]) == {""}
     assert np.linalg.norm(r.corners[~on_left] - truth.corners["pose000"][~on_left], axis=-1).max() < 0.06
+    # saturation="keep" (no check): the clipped corners are kept, and are worse
+    kept = phase_corners(clipped, start, PAPER.corner_phase(), p.full_scale, saturation="keep")
+    assert np.isfinite(kept.corners).all()
+    err = np.linalg.norm(kept.corners - truth.corners["pose000"], axis=-1)
+    assert err[on_left].mean() > 2 * err[~on_left].mean()
     # no fringes at all (a flat grey): every corner 'fringe modulation too low'
     flat = phase_corners(np.full_like(p.phase, 0.5 * p.full_scale), start, PAPER.corner_phase(), p.full_scale)
     assert np.isnan(flat.corners).all() and set(flat.reason.ravel()) == {"fringe modulation too low"}

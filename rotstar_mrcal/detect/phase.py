@@ -28,7 +28,12 @@ and the corner is where both planes are 0. The window is then centred on
 that point and the fit repeated once. h = 3 px is the paper's best.
 
 A corner is NaN, with its reason, when a sample of its window is saturated
-in any of the 8 frames (the clipped sinusoid biases the phase), when the
+in any of the 8 frames (the clipped sinusoid biases the phase). Once the white
+clips, the crests of the four steps together cover every phase, so every
+pixel is clipped in some step and a saturating exposure rejects every corner
+(leaving the clipped pixels out would leave none either); saturation="keep"
+uses the clipped values as they are, which is what a pipeline without the
+check does), when the
 fringes' modulation in the window is below MIN_MODULATION of full scale, when
 its window leaves the image, when the two planes are nearly parallel, or
 when the solution leaves the window.
@@ -86,13 +91,15 @@ def _plane_zero(d: np.ndarray, du: np.ndarray, dv: np.ndarray) -> tuple[np.ndarr
 
 def phase_corners(phase: np.ndarray, start: np.ndarray, target: np.ndarray, full_scale: float,
                   half_window: int = HALF_WINDOW, min_modulation: float = MIN_MODULATION,
-                  saturated: float = SATURATED) -> PhaseCorners:
+                  saturated: float = SATURATED, saturation: str = "reject") -> PhaseCorners:
     """Sub-pixel corners from the phase-shift frames; see the module doc
 
     phase: (2, 4, H, W) the shifts along x then y, steps 0..3; start:
     (..., 2) image points (NaN: none); target: (..., 2) the corners' phases
     along x and y (radians, Layout.corner_phase()).
     """
+    if saturation not in ("reject", "keep"):
+        raise ValueError(f"saturation {saturation!r}; must be reject or keep")
     phase = np.asarray(phase, float)
     if phase.ndim != 4 or phase.shape[:2] != (2, 4):
         raise ValueError(f"phase frames must be (2 axes, 4 steps, H, W), not {phase.shape}")
@@ -125,7 +132,7 @@ def phase_corners(phase: np.ndarray, start: np.ndarray, target: np.ndarray, full
         p = phi[:, v, u].transpose(1, 0, 2)  # (n, 2, K)
         m = np.median(mod[:, v, u], axis=-1).T / full_scale  # (n, 2)
         modulation[idx] = m
-        sat = clipped[v, u].any(axis=-1)
+        sat = clipped[v, u].any(axis=-1) if saturation == "reject" else np.zeros(len(idx), bool)
         low = (m < min_modulation).any(axis=-1)
         reason[idx[sat]] = "saturated: a sample of the window at full scale"
         reason[idx[low & ~sat]] = "fringe modulation too low"
