@@ -423,7 +423,7 @@ def _field(f: dict, k: int, key: str, default=None, **kw):
     return _get({f"frames[{k}]": f}, f"frames[{k}].{key}", default, **kw)
 
 
-def _check_phase(frames: list[dict], W: int, H: int) -> tuple[float, tuple[float, float] | None]:
+def _check_phase(frames: list[dict]) -> tuple[float, tuple[float, float] | None]:
     """(period, origin) of the phase-shift frames, or (0, None) without them; ValueError naming the field"""
     idx = [k for k, f in enumerate(frames) if f["kind"] == "phase"]
     if not idx:
@@ -530,7 +530,7 @@ def layout_from_dict(d: dict) -> Layout:
         identity=_check_identity(d, nx, ny),
         star_segments=_check_star(d["frames"], pitch),
     )
-    period, porigin = _check_phase(d["frames"], W, H)
+    period, porigin = _check_phase(d["frames"])
     if period:
         layout = dataclasses.replace(layout, phase_period=period,
                                      phase_origin=None if porigin == tuple(map(float, layout.origin)) else porigin)
