@@ -58,6 +58,8 @@ class Pose:
     full_scale: float  # 255 or 65535
     files: list[str]  # paths of the rotstar frames, in order
     identity: np.ndarray | None = None  # (nidentity, H, W) float32, the identity frames, or None
+    phase: np.ndarray | None = None  # (2, 4, H, W) float32: the phase shifts along x, then y, steps 0..3; or None
+    star: np.ndarray | None = None  # (H, W) float32, the star frame, or None
 
     @property
     def first_file(self) -> str:
@@ -215,14 +217,20 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         )
     if len(scales) > 1:
         raise DatasetError(f"{folder}: frames mix 8- and 16-bit PNGs")
-    checker = None
-    cb = [f for f in frames if f["kind"] == "checkerboard"]
-    if cb:
-        fn = os.path.join(folder, cb[0]["file"])
-        if os.path.exists(fn):
-            checker, _ = read_image(fn)
-            if checker.shape != imgs[0].shape:
-                raise DatasetError(f"{fn}: frame size differs from the rotating-star frames")
+    checker = _optional(folder, frames, "checkerboard", imgs[0].shape)
+    star = _optional(folder, frames, "star", imgs[0].shape)
+    phase = None
+    ph = [f for f in frames if f["kind"] == "phase"]
+    if ph:
+        order = sorted(ph, key=lambda f: (f["axis"], f["step"]))
+        stack = []
+        for f in order:
+            fn = os.path.join(folder, f["file"])
+            img, fs = read_image(fn)
+            if img.shape != imgs[0].shape or fs not in scales:
+                raise DatasetError(f"{fn}: frame size or bit depth differs from the rotating-star frames")
+            stack.append(img)
+        phase = np.stack(stack).reshape(2, len(stack) // 2, *imgs[0].shape)
     n = len(rot_files)
     return Pose(
         name=pose,
@@ -232,7 +240,23 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         full_scale=scales.pop(),
         files=rot_files,
         identity=np.stack(imgs[n:]) if id_files else None,
+        phase=phase,
+        star=star,
     )
+
+
+def _optional(folder: str, frames: list[dict], kind: str, shape) -> np.ndarray | None:
+    """The one frame of `kind` (checkerboard, star) when pattern.json lists it and the pose holds it, else None"""
+    f = [f for f in frames if f["kind"] == kind]
+    if not f:
+        return None
+    fn = os.path.join(folder, f[0]["file"])
+    if not os.path.exists(fn):
+        return None
+    img, _ = read_image(fn)
+    if img.shape != shape:
+        raise DatasetError(f"{fn}: frame size differs from the rotating-star frames")
+    return img
 
 
 def write_pose(seq: str, pose: str, images: dict[str, np.ndarray]) -> str:

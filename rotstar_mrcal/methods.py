@@ -21,6 +21,8 @@ A *method* turns the images of one pose into labelled corners (ny, nx, 2)
                             fairness rule)
             'square'        a square N x N checkerboard as an image file
                             (mrgingham finds only square boards)
+            'phase'         the phase-shift frames (rotstar-pattern --paper-sequence)
+            'star'          the star frame of Schops et al. (the same)
     start   'own'           it finds the board itself
             'rotstar'       it refines rotstar's labelled corners, each in
                             rotstar's per-corner window (PoseImages.start /
@@ -130,6 +132,8 @@ class PoseImages:
     frames: np.ndarray | None = None  # (nframes, H, W) rotating-star frames
     identity: np.ndarray | None = None  # (nidentity, H, W) identity frames, when the pattern has them
     checkerboard: np.ndarray | None = None  # (H, W) the checkerboard frame (float: an average)
+    phase: np.ndarray | None = None  # (2, 4, H, W) the phase shifts along x then y, steps 0..3
+    star: np.ndarray | None = None  # (H, W) the star frame
     png: str | None = None  # the board as an image file, for methods that are programs (mrgingham)
     start: np.ndarray | None = None  # (ny, nx, 2) start of start='rotstar' methods (default: rotstar's corners)
     start_window: np.ndarray | None = None  # (ny, nx) their half-windows, px (default: rotstar's windows)
@@ -145,6 +149,7 @@ class Found:
     weights: np.ndarray | None = None  # (ny, nx) or None
     why: str = ""  # why there is no board
     shifts: object = None  # rotstar's detect.display.FrameShifts of the pose (the dataset's motion check)
+    reasons: np.ndarray | None = None  # (ny, nx) str: why a corner is NaN ('' where found), when the method says
 
 
 def rotstar_detection(p: PoseImages):
@@ -180,25 +185,74 @@ def _finder(how: str, what: str):
     return run
 
 
+def _start(p: PoseImages):
+    """(start corners, their half-windows) of a start='rotstar' method, or a Found saying why there are none"""
+    if p.start is not None:
+        return p.start, p.start_window
+    if p.frames is None:
+        return Found(None, None, "no start (rotstar found no board)")
+    r = rotstar_detection(p)
+    if not r.found:
+        return Found(None, None, f"no start (rotstar: {r.error})")
+    return r.corners, r.window
+
+
 def _from_rotstar(fn_name: str):
     def run(p: PoseImages) -> Found:
         from .detect import baselines
 
         if p.checkerboard is None:
             return Found(None, None, "no checkerboard frame")
-        start, window = p.start, p.start_window
-        if start is None:
-            if p.frames is None:
-                return Found(None, None, "no start (rotstar found no board)")
-            r = rotstar_detection(p)
-            if not r.found:
-                return Found(None, None, f"no start (rotstar: {r.error})")
-            start, window = r.corners, r.window
+        start = _start(p)
+        if isinstance(start, Found):
+            return start
         fn = getattr(baselines, fn_name)
         return Found(baselines.refine_by_window(lambda im, x, w: fn(im, x, win=w),
-                                                np.asarray(p.checkerboard, np.float32), start, window))
+                                                np.asarray(p.checkerboard, np.float32), *start))
 
     return run
+
+
+def _phase(p: PoseImages) -> Found:
+    """detect.phase.phase_corners from rotstar's corners (the paper's phase-shift baseline)"""
+    from .detect.phase import phase_corners
+
+    if p.phase is None:
+        return Found(None, None, "no phase-shift frames")
+    if not p.layout.phase:
+        return Found(None, None, "the pattern has no phase-shift frames")
+    start = _start(p)
+    if isinstance(start, Found):
+        return start
+    r = phase_corners(p.phase, start[0], p.layout.corner_phase(), p.full_scale)
+    if not np.isfinite(r.corners).all(axis=-1).any():
+        return Found(None, None, "no corner: " + reason_counts(r.reason), reasons=r.reason)
+    return Found(r.corners, None, reasons=r.reason)
+
+
+def _star(p: PoseImages) -> Found:
+    """The symmetric refinement (Eq. 1) on the one star frame, from rotstar's corners in rotstar's windows"""
+    from .detect.baselines import refine_by_window
+
+    if p.star is None:
+        return Found(None, None, "no star frame")
+    start = _start(p)
+    if isinstance(start, Found):
+        return start
+    return Found(refine_by_window(lambda im, x, w: refine_symmetric(im[None], x, w),
+                                 np.asarray(p.star, np.float32), *start))
+
+
+def reason_counts(reason) -> str:
+    """'3 saturated: ..., 1 window leaves the image' from per-corner reasons ('' = found)
+
+    >>> reason_counts(np.array(["", "low", "low", "far"], dtype=object))
+    '2 low, 1 far'
+    """
+    r = [x for x in np.asarray(reason, dtype=object).ravel() if x]
+    names, counts = np.unique(np.array(r, dtype=str), return_counts=True) if r else ([], [])
+    order = np.argsort(-np.asarray(counts), kind="stable")
+    return ", ".join(f"{counts[i]} {names[i]}" for i in order)
 
 
 def _mrgingham(p: PoseImages, *args) -> Found:
@@ -214,7 +268,7 @@ def _mrgingham(p: PoseImages, *args) -> Found:
 class Method:
     name: str
     title: str  # the name in the benchmark's tables
-    needs: str  # 'rotstar' | 'checkerboard' | 'square'
+    needs: str  # 'rotstar' | 'checkerboard' | 'square' | 'phase' | 'star'
     start: str  # 'own' | 'rotstar'
     description: str  # one line
     run: Callable  # run(PoseImages, *args) -> Found
@@ -244,6 +298,12 @@ METHODS = {m.name: m for m in (
            "checkerboard frame, cv2.cornerSubPix from rotstar's corners", _from_rotstar("opencv_subpix")),
     Method("saddle", "saddle fit (Lucchese-Mitra)", "checkerboard", "rotstar",
            "checkerboard frame, Lucchese-Mitra saddle fit from rotstar's corners", _from_rotstar("saddle_refine")),
+    Method("phase", "phase shifting (4-step, phase planes)", "phase", "rotstar",
+           "phase-shift frames along x and y: where both phases take the corner's, planes fitted in 7x7 px about "
+           "rotstar's corners", _phase, detail="half-window 3", demo=False),
+    Method("star", "star (Schops et al.), symmetric refinement", "star", "rotstar",
+           "star frame, the symmetric refinement (Eq. 1) on the one frame from rotstar's corners, rotstar's window",
+           _star, demo=False),
     Method("mrgingham", "mrgingham", "square", "own", "square checkerboard, mrgingham", _mrgingham, relabel=True),
     Method("mrgingham-noclahe", "mrgingham --noclahe", "square", "own",
            "square checkerboard, mrgingham --noclahe (no CLAHE equalisation)", _mrgingham, ("--noclahe",),

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
-from rotstar_mrcal import simulate
+from rotstar_mrcal import dataset as ds, simulate
 from rotstar_mrcal.capture.backend_libcamera import LibcameraSource
 from rotstar_mrcal.capture.backend_replay import ReplaySource, save_recording
 from rotstar_mrcal.capture.backends import open_source
@@ -250,3 +250,33 @@ def test_segment_cli_on_a_folder_of_8bit_frames(loop_frames, pattern_dir, tmp_pa
                             str(tmp_path / "seq" / "q")]) == 0
     err = capsys.readouterr().err
     assert "10-bit data in a 16-bit word? scaled by 64" in err and "board found: 24 of 24" in err
+
+
+# ---- the paper's whole sequence ----------------------------------------------------------------
+def test_capture_paper_sequence_one_pose(tmp_path, capsys):
+    """rotstar-capture on a replay of the player showing rotstar-pattern --paper-sequence (29 loop entries): the pose
+    holds every frame, the phase shifts and the star included, each its own display frame"""
+    paper = make_layout(screen=(800, 600), pitch=100, band=24, phase_period=100, star_segments=16)
+    n = len(player_loop(paper.frames()))
+    hold = 24  # 29 entries x 24 refreshes at 60 Hz = 11.6 s = 290 camera frames at 25 fps: the stream repeats
+    model = simulate.preset_model("pinhole-small")
+    rt = simulate.random_poses(model, paper, 1, np.random.default_rng(3))[0]
+    E = loop_irradiance(paper, model, rt)
+    sched = player_schedule(n, hold=hold, refresh_hz=60, duration=25)
+    frames, _ = camera_stream(E, sched, 290, fps=25, exposure_s=0.012, noise=0.01, t0=0.013, rng=7)
+    save_recording(str(tmp_path / "session.npy"), np.concatenate([frames] * 3), fps=25)
+    (tmp_path / "pattern").mkdir()
+    (tmp_path / "pattern" / "pattern.json").write_text(paper.to_json())
+    out_dir = tmp_path / "seq"
+    code, out, err = run_capture(["--backend", "replay", "--device", tmp_path / "session.npy", "--pattern",
+                                  tmp_path / "pattern", "--out", out_dir, "--auto", "--frames", 700, "--hold", hold],
+                                 capsys)
+    assert code == 0, err
+    assert out.split() == [str(out_dir / "pose000")] and "pose000: board complete (24/24)" in err
+    names = [f["file"] for f in paper.frames()]
+    assert sorted(f for f in os.listdir(out_dir / "pose000") if f.endswith(".png")) == sorted(names)
+    pose = ds.load_pose(str(out_dir), "pose000", paper)
+    assert pose.phase.shape == (2, 4, 400, 640) and pose.star.shape == (400, 640)
+    for k, f in enumerate(paper.frames()):
+        got = cv2.imread(str(out_dir / "pose000" / f["file"]), cv2.IMREAD_UNCHANGED).astype(float) / 65535
+        assert np.sqrt(np.mean((got - np.clip(0.9 * E[k + 1], 0, 1)) ** 2)) < 0.01, f["file"]

@@ -33,7 +33,7 @@ def pose():
 def test_registry_entries_are_well_formed():
     for name, m in METHODS.items():
         assert m.name == name and m.title and m.description and callable(m.run)
-        assert m.needs in ("rotstar", "checkerboard", "square") and m.start in ("own", "rotstar")
+        assert m.needs in ("rotstar", "checkerboard", "square", "phase", "star") and m.start in ("own", "rotstar")
         assert not m.variant_of or m.variant_of in METHODS
     for name, r in REFINERS.items():
         assert r.name == name and r.needs in ("rotstar", "checkerboard") and callable(r.refine)
@@ -45,8 +45,9 @@ def test_selections_keep_the_experiments_methods():
         "rotstar", "rotstar-weighted", "opencv-sb", "cornersubpix", "saddle"]
     assert method_names(needs="square", demo=True) == ["mrgingham"]
     assert method_names(variants=False) == ["rotstar", "opencv-sb", "opencv-classic", "cornersubpix", "saddle",
-                                            "mrgingham", "mrgingham-noclahe"]
-    assert method_names(start="rotstar") == ["cornersubpix", "saddle"]
+                                            "phase", "star", "mrgingham", "mrgingham-noclahe"]
+    assert method_names(start="rotstar") == ["cornersubpix", "saddle", "phase", "star"]
+    assert method_names(needs=("phase", "star"), demo=True) == []  # the paper's table comes later
 
 
 def test_unknown_names():

@@ -1,6 +1,7 @@
 """The display sequence: layout contract and exact rendering"""
 
 import json
+import re
 import math
 import subprocess
 import sys
@@ -164,3 +165,79 @@ def test_cli_writes_sequence(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(out), "--pitch", "99"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "even" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+
+
+# ---- the paper's whole sequence: phase shifts and the star ---------------------------------
+def paper():
+    return make_layout(screen=(800, 600), pitch=100, band=24, phase_period=50, star_segments=16)
+
+
+def test_paper_sequence_frames_and_pattern_json():
+    L = paper()
+    d = json.loads(L.to_json())
+    assert [f["kind"] for f in d["frames"]] == ["rotstar"] * 8 + ["identity"] * 10 + ["phase"] * 8 + \
+        ["checkerboard", "star"]
+    ph = d["frames"][18:26]
+    assert [(f["axis"], f["step"]) for f in ph] == [(a, n) for a in "xy" for n in range(4)]
+    assert ph[1]["shift_rad"] == pytest.approx(math.pi / 2) and ph[0]["period_px"] == 50
+    assert ph[0]["phase_origin"] == list(L.origin) and d["frames"][-1]["segments"] == 16
+    assert layout_from_dict(d) == L
+    assert make_layout(screen=(800, 600), pitch=100, band=24).frames() == \
+        [f for f in L.frames() if f["kind"] not in ("phase", "star")]  # the default stays as it was
+    # the phase at the corners: period 50 = pitch / 2, so every corner has phase 0
+    assert np.allclose(np.cos(L.corner_phase()), 1)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d["frames"][20].update(axis="z"), 'frames[20].axis is "z"; must be "x" or "y"'),
+    (lambda d: d["frames"][21].update(period_px=2), "frames[21].period_px is 2; must be between 4"),
+    (lambda d: d["frames"][21].update(period_px=60), "frames[21]: period_px 60 and phase_origin"),
+    (lambda d: d["frames"][21].pop("step"), "frames[21].step missing"),
+    (lambda d: d["frames"][21].update(shift_rad=0.1), "frames[21].shift_rad is 0.1; step 3 of 4 is 4.71239"),
+    (lambda d: d["frames"][21].update(phase_origin=[1]), "frames[21].phase_origin is [1]; must be [x, y]"),
+    (lambda d: d["frames"].pop(21), "the phase frames along x have steps [0, 1, 2]"),
+    (lambda d: d["frames"][-1].update(segments=6), "frames[27].segments is 6; must be a multiple of 4"),
+    (lambda d: d["frames"][-1].update(cell_px=90), "frames[27].cell_px is 90; the star's cells are the grid's "),
+    (lambda d: d["frames"].append(dict(d["frames"][-1], file="star2.png")), "frames[28]: a second star frame"),
+])
+def test_paper_sequence_pattern_json_checked(edit, message):
+    d = json.loads(paper().to_json())
+    edit(d)
+    with pytest.raises(ValueError, match=re.escape(message)) as e:
+        layout_from_dict(d)
+    assert "\n" not in str(e.value)
+
+
+def test_phase_frames_emit_a_sinusoid_through_the_display_gamma(tmp_path):
+    """The PNG values are gamma-encoded; the light (decode_display of the PNG) is the sinusoid, and the 4-step
+    phase at the corners is the corners' phase"""
+    out = tmp_path / "pat"
+    r = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(out), "--screen", "800x600",
+                        "--pitch", "100", "--band", "24", "--paper-sequence"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "8 phase-shift frames (period 100 px), the checkerboard, the 16-segment star" in r.stderr
+    L = layout_from_dict(json.loads((out / "pattern.json").read_text()))
+    assert L.phase_period == 100 and L.star_segments == 16
+    x0, y0, x1, y1 = L.board_extent()
+    for axis in "xy":
+        png = [cv2.imread(str(out / f"phase_{axis}_{n}.png"), cv2.IMREAD_UNCHANGED) for n in range(4)]
+        light = [decode_display(v) for v in png]
+        line = (lambda im: im[y0 + 5, x0:x1]) if axis == "x" else (lambda im: im[y0:y1, x0 + 5])
+        u = np.arange(x0, x1) if axis == "x" else np.arange(y0, y1)
+        o = L.origin[0 if axis == "x" else 1]
+        want = [0.5 + 0.5 * np.cos(2 * np.pi * (u + 0.5 - o) / 100 + n * np.pi / 2) for n in range(4)]
+        for n in range(4):
+            assert np.abs(line(light[n]) - want[n]).max() < 0.005  # 8-bit steps of the gamma-encoded values
+            assert np.abs(line(png[n]) / 255.0 - want[n]).max() > 0.1  # the values themselves are not sinusoidal
+        phi = np.arctan2(line(light[3]) - line(light[1]), line(light[0]) - line(light[2]))
+        assert np.abs(np.angle(np.exp(1j * (phi - 2 * np.pi * (u + 0.5 - o) / 100)))).max() < 0.02
+    star = cv2.imread(str(out / "star.png"), cv2.IMREAD_UNCHANGED)
+    c = L.corner_screen_xy().astype(int)
+    # point symmetric about every corner, and every cell half white
+    for (x, y) in c.reshape(-1, 2):
+        cell = decode_display(star[y - 50 : y + 50, x - 50 : x + 50])
+        assert np.allclose(cell, 1 - cell[::-1], atol=0.01) and abs(cell.mean() - 0.5) < 0.01
+        assert np.array_equal(star[y - 40 : y + 40, x - 40 : x + 40], star[y + 39 : y - 41 : -1, x + 39 : x - 41 : -1])
+    bad = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(tmp_path / "b"),
+                          "--star-segments", "12"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "need --paper-sequence" in bad.stderr

@@ -371,3 +371,43 @@ def test_playback_holds_and_keys(tmp_path, browsers):
     assert b.evaluate("rotstar.status().pos") == (p0 + 1) % n
     b.key("c", "KeyC", 67)
     assert b.evaluate("rotstar.status().mode") == "check"
+
+
+# ---- the paper's whole sequence ----------------------------------------------
+@pytest.fixture(scope="module")
+def ipad_paper(tmp_path_factory):
+    """rotstar-pattern --paper-sequence on the iPad: 8 phase-shift frames after the identity frames, the star last"""
+    out = tmp_path_factory.mktemp("paper")
+    r = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(out), "--paper-sequence"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+def test_paper_sequence_levels_match_the_pngs(ipad_paper):
+    """The closed forms of the phase and star frames' mean luminance equal the decoded PNGs' means"""
+    from rotstar_mrcal.pattern.render import decode_display
+
+    d = json.loads((ipad_paper / "pattern.json").read_text())
+    loop = player_loop(d["frames"])
+    assert [e["kind"] for e in loop] == ["start-marker"] + ["rotstar"] * 8 + ["identity"] * 13 + ["phase"] * 8 + \
+        ["checkerboard", "star"]
+    lev = expected_levels(layout_from_dict(d), loop)
+    got = [float(decode_display(im).mean()) for im in loop_images(ipad_paper)]
+    np.testing.assert_allclose(lev, got, atol=2e-3)
+
+
+@needs_chromium
+def test_paper_sequence_pixel_exact(ipad_paper, browsers):
+    """The phase-shift frames (gamma-encoded fringes: any colour conversion would change their values) and the
+    star frame reach the screen pixel for pixel"""
+    want = loop_images(ipad_paper)
+    H, W = want[0].shape
+    b = browsers(1)
+    b.emulate(W, H, 1)
+    st = b.load((ipad_paper / "player.html").as_uri())
+    assert st["mode"] == "check" and st["ok"], st["problems"]
+    assert st["entries"] == 32 and st["kinds"][-10:] == ["phase"] * 8 + ["checkerboard", "star"]
+    for k in range(22, 32):
+        assert b.evaluate(f"rotstar.show({k})")
+        assert_gray_equal(b.screenshot(), want[k], f"loop entry {k} ({st['files'][k]})")

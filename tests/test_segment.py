@@ -346,3 +346,24 @@ def test_d435_full_size_10bit_end_to_end(tmp_path, capsys):
     e = np.linalg.norm(got - truth, axis=-1)
     print(f"D435 10-bit: rms {np.sqrt(np.mean(e**2)):.4f} px, max {e.max():.4f} px")
     assert np.sqrt(np.mean(e**2)) < 0.02
+
+
+# ---- the paper's whole sequence ------------------------------------------------------------
+PAPER = make_layout(screen=(800, 600), pitch=100, band=24, phase_period=100, star_segments=16)
+
+
+def test_paper_sequence_segments_in_order():
+    """rotstar-pattern --paper-sequence: the phase shifts (whose four steps have the same level) and the star
+    come back each as its own display frame, in order"""
+    model = simulate.preset_model("pinhole-small")
+    rt = simulate.random_poses(model, PAPER, 1, np.random.default_rng(3))[0]
+    E = half(loop_irradiance(PAPER, model, rt))
+    n = len(player_loop(PAPER.frames()))
+    assert n == 29  # marker, 8 rotating-star, 10 identity, 8 phase, the checkerboard, the star
+    sched = player_schedule(n, hold=20, duration=2.2 * n / 3)
+    frames, _ = camera_stream(E, sched, int(25 * 2.1 * n / 3), fps=25, exposure_s=0.01, noise=0.004, bits=8, rng=1)
+    seg = segment(frames, PAPER.frames(), PAPER, 255.0)
+    assert seg.loop.ok, [v.reason for v in seg.loops]
+    for k, f in enumerate(PAPER.frames()):  # a phase step swapped with its neighbour would be a quarter period off
+        want = np.clip(GAIN * E[k + 1], 0, 1) * 255
+        assert np.sqrt(np.mean((seg.images[f["file"]] - want) ** 2)) < 2 * 0.004 * 255, f["file"]

@@ -468,3 +468,36 @@ def test_png_frames_decode_display(tmp_path, frames):
     # 8-bit gamma-encoded: exact at 0 and 1, within a display step elsewhere
     assert np.array_equal(back[frames == 1], frames[frames == 1])
     assert np.max(np.abs(back - frames)) < 0.01
+
+
+def test_cli_paper_sequence(tmp_path, capsys):
+    """rotstar-simulate renders every frame of the paper's sequence: at the true corners the 4-step phase of both
+    fringes is the corners' phase (0: the period is the pitch), and the star frame is bright and dark around them"""
+    from rotstar_mrcal.cli.simulate import main
+
+    paper = make_layout(screen=(800, 600), pitch=100, band=24, phase_period=100, star_segments=16)
+    pat = tmp_path / "pat"
+    ds.write_pattern(str(pat), paper)
+    out = str(tmp_path / "seq")
+    assert main(["--out", out, "--pattern", str(pat), "--camera", "pinhole-small", "--poses", "1", "--noise", "0.002"]) == 0
+    assert "(28 frames each)" in capsys.readouterr().err
+    d, layout = ds.read_pattern(out)
+    assert layout == paper
+    pose = ds.load_pose(out, "pose000", layout)
+    assert pose.phase.shape == (2, 4, 400, 640) and pose.star.shape == (400, 640)
+    c = load_truth(out).corners["pose000"].reshape(-1, 2)
+    i0, j0 = np.floor(c).astype(int).T
+    fx, fy = (c - np.floor(c)).T
+
+    def at(img):  # bilinear at the true corners
+        return ((1 - fy) * ((1 - fx) * img[j0, i0] + fx * img[j0, i0 + 1])
+                + fy * ((1 - fx) * img[j0 + 1, i0] + fx * img[j0 + 1, i0 + 1]))
+
+    for axis in range(2):
+        s = [at(pose.phase[axis, n]) for n in range(4)]
+        phi = np.arctan2(s[3] - s[1], s[0] - s[2])
+        assert np.abs(phi).max() < 0.15, (axis, phi)  # rad: a twentieth of a pixel's worth of the period
+    (x0, y0), (x1, y1) = np.floor(c.min(axis=0)).astype(int), np.ceil(c.max(axis=0)).astype(int)
+    assert pose.star[y0:y1, x0:x1].std() > 0.15 * 65535  # black and white wedges over the grid (~20 px cells)
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path / "x"), "--pattern", str(pat), "--paper-sequence"])

@@ -47,7 +47,8 @@ class DetectionRun:
 
 def benchmarked_methods(have_programs: bool = True) -> list[str]:
     """The methods the benchmark times: every method but the variants (and the programs, when missing)"""
-    return [n for n in method_names(variants=False) if have_programs or METHODS[n].needs != "square"]
+    needs = ("rotstar", "checkerboard") + (("square",) if have_programs else ())
+    return method_names(needs=needs, variants=False)  # (its scene renders no phase-shift or star frames)
 
 
 def pose_inputs(name: str, scene: Scene, p: RenderedPose, full_scale: float, png: str | None,

@@ -40,6 +40,9 @@ def input_text(name: str) -> str:
     m = METHODS[name]
     if m.needs == "rotstar":
         return "8 rotating-star frames"
+    if m.needs in ("phase", "star"):
+        what = "4-step phase shifts along x and y" if m.needs == "phase" else "the star frame"
+        return f"{what}: rotstar's corners" + (f", {m.detail}" if m.detail else ", rotstar's window")
     if m.start == "rotstar":
         start = f"rotstar's corners + {START_PERTURB_PX} px, rotstar's window"
     else:

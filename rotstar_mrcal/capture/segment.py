@@ -53,7 +53,11 @@ the panel scans out). Segmentation, step by step:
    white/black each frame) must have the recorded sign. The identity frames'
    levels differ by a few elements' area (and by which elements are in
    view), so their steps are never "large": they count in the correlation
-   only, where the band flips and the black start marker dominate;
+   only, where the band flips and the black start marker dominate. The
+   same holds for the phase-shift frames of the paper's sequence (their
+   four steps have nearly the same level; each step moves the fringes by a
+   quarter period, a change the difference signal sees over half the
+   board) and the star frame;
 8. motion: in every stretch, the image shift between the first and the
    second half of its stable frames (motion.image_shift), per frame; the
    mean over the loop's stretches (noise averages out, a steady drift adds

@@ -9,7 +9,7 @@ import sys
 from .. import dataset
 from ..detect.display import MAX_MOTION
 from ..detect.labelled import MIN_WINDOW
-from ..methods import REFINERS
+from ..methods import METHODS, REFINERS
 from ..detect.run import detect_dataset
 from ..focal import estimate_focal
 from ..vnl import write_corners
@@ -39,6 +39,9 @@ example:
 """ + EXIT_CODES_HELP + "\n"
 
 
+DETECT_METHODS = ["rotstar"] + [n for n, m in METHODS.items() if m.start == "rotstar"]
+
+
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-detect", description=DESCRIPTION, epilog=EPILOG,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -51,6 +54,10 @@ def parse_args(argv=None):
                    help="symmetric: the paper's Eq. 1 on all rotating-star frames (default); "
                         "opencv: cv2.cornerSubPix on the checkerboard frame; "
                         "saddle: Lucchese-Mitra saddle fit on the checkerboard frame")
+    p.add_argument("--method", choices=DETECT_METHODS, default="rotstar",
+                   help="whose corners to write, all from the same poses and started from the rotating star's "
+                        "labelled corners: " + "; ".join(f"{n}: {METHODS[n].description}" for n in DETECT_METHODS[1:])
+                        + " (default rotstar; phase and star need a sequence from rotstar-pattern --paper-sequence)")
     p.add_argument("--weights", action="store_true",
                    help="write a weight column (1/sigma of each corner, normalised to median 1) "
                         "for mrcal's --corners-cache-has-weights")
@@ -60,7 +67,10 @@ def parse_args(argv=None):
     p.add_argument("--jobs", "-j", type=number_arg(int, 1), default=1, help="poses processed in parallel (default 1)")
     p.add_argument("--no-hint", action="store_true", help=argparse.SUPPRESS)  # rotstar-calibrate runs its own
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines (skipped poses are still reported)")
-    return p.parse_args(argv)
+    a = p.parse_args(argv)
+    if a.method != "rotstar" and (a.weights or a.refine != "symmetric"):
+        p.error(f"--weights and --refine are rotstar's; --method {a.method} gives its own corners")
+    return a
 
 
 def mrcal_command(layout, imagersize, focal, vnl_name, glob, weights=False) -> str:
@@ -116,7 +126,12 @@ def _main(argv=None) -> int:
 
     def report(r):
         if r.found:
-            progress.step(r.pose, f"{r.corners.n_valid} of {layout.nx * layout.ny} corners")
+            why = ""
+            if a.method != "rotstar" and r.corners.reasons is not None and r.corners.n_valid < layout.nx * layout.ny:
+                from ..methods import reason_counts
+
+                why = f" ({a.method}: {reason_counts(r.corners.reasons)})"
+            progress.step(r.pose, f"{r.corners.n_valid} of {layout.nx * layout.ny} corners{why}")
         else:
             progress.step(r.pose, f"skipped: {r.error}", important=True)
 
@@ -138,7 +153,7 @@ def _main(argv=None) -> int:
         progress.step(name, f"skipped: {msg}", important=True)
     try:
         det = detect_dataset(a.seq, window=a.window, refine=a.refine, max_motion=a.max_motion, jobs=a.jobs,
-                             poses=poses, progress=report)
+                             poses=poses, progress=report, method=a.method)
     except dataset.DatasetError as e:
         fail(str(e))
     for r in det.rejected:

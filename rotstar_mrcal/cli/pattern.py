@@ -22,7 +22,11 @@ k*STEP in frame k, framed by border bands that are white in even frames and
 black in odd ones; then the identity frames, in which every element's square
 is white or black by one bit of its grid index (a constant-weight code: 13
 frames for 14x9 corners); then one plain checkerboard frame whose inner
-corners are the same screen points (the baseline). Also writes pattern.json,
+corners are the same screen points (the baseline). --paper-sequence adds the
+other frames of the paper's real-world experiment: after the identity frames,
+4-step phase shifts along x and along y (sinusoidal fringes, phase 0 on every
+corner with the default period), and after the checkerboard the 16-segment
+star of Schops et al. on every corner. Also writes pattern.json,
 which rotstar-detect needs beside the recorded poses, and player.html, and
 prints the mrcal object arguments on stderr.
 
@@ -65,10 +69,22 @@ def parse_args(argv=None):
                         "of view (no orientation marker or outer band in sight) still gives correctly labelled "
                         "corners; without them the whole board must be in view. They lengthen the sequence "
                         "(13 more frames for 14x9 corners)")
+    p.add_argument("--paper-sequence", action="store_true",
+                   help="the paper's whole sequence: also the phase-shift frames (4 along x, 4 along y) after the "
+                        "identity frames and a star frame after the checkerboard (rotstar-detect --method phase, star)")
+    p.add_argument("--phase-period", type=number_arg(float, 4), default=None,
+                   help="with --paper-sequence: fringe period in display pixels (default: the pitch, so that every "
+                        "corner has phase 0)")
+    p.add_argument("--star-segments", type=number_arg(int, 4, 64), default=16,
+                   help="with --paper-sequence: the star's black and white segments, a multiple of 4 (default 16)")
     p.add_argument("--gamma", type=number_arg(float, 0.1, 10), default=2.2,
                    help="display gamma applied to the PNG values so that anti-aliased pixels emit the "
                         "right amount of light (default 2.2; 1 writes linear values)")
     a = p.parse_args(argv)
+    if not a.paper_sequence and (a.phase_period is not None or a.star_segments != 16):
+        p.error("--phase-period and --star-segments need --paper-sequence")
+    if a.star_segments % 4:
+        p.error(f"--star-segments {a.star_segments}: must be a multiple of 4")
     if (a.frames - 1) * abs(a.step) >= math.pi:
         p.error(f"--frames {a.frames} turned by --step {a.step:g} reach pi, where the frames repeat; "
                 f"use a smaller step (at most pi/{a.frames})")
@@ -84,7 +100,9 @@ def _main(argv=None) -> int:
     pitch_m = a.pixel_pitch_mm / 1000 if a.pixel_pitch_mm else 0.0254 / a.ppi
     try:
         layout = make_layout(screen=a.screen, pixel_pitch_m=pitch_m, pitch=a.pitch, band=a.band,
-                             nframes=a.frames, step=a.step, nx=a.nx, ny=a.ny, identity=a.identity)
+                             nframes=a.frames, step=a.step, nx=a.nx, ny=a.ny, identity=a.identity,
+                             phase_period=(a.phase_period or a.pitch) if a.paper_sequence else 0,
+                             star_segments=a.star_segments if a.paper_sequence else 0)
     except ValueError as e:
         fail(str(e).replace("leave the identity frames out", "add --no-identity"))
     check_output_path(a.out, folder=True)
@@ -108,7 +126,10 @@ def _main(argv=None) -> int:
     say(f"{layout.nx}x{layout.ny} corners, pitch {layout.pitch} px = {layout.spacing_m * 1000:.4f} mm, "
         f"marker element {layout.marker}; {layout.nframes} rotating-star frames, "
         + (f"{code.nframes} identity frames, " if code else "no identity frames, ")
-        + f"the checkerboard; wrote {a.out}/pattern.json")
+        + (f"8 phase-shift frames (period {layout.phase_period:g} px), " if layout.phase else "")
+        + "the checkerboard"
+        + (f", the {layout.star_segments}-segment star" if layout.star_segments else "")
+        + f"; wrote {a.out}/pattern.json")
     say("mrcal object arguments: " + " ".join(layout.mrcal_object_args()))
     return 0
 

@@ -24,6 +24,8 @@ import numpy as np
 
 from ..dataset import DatasetError, read_pattern
 from ..pattern.layout import make_layout
+
+PAPER_SEQUENCE = dict(phase_period=150, star_segments=16)  # rotstar-pattern --paper-sequence's defaults (pitch 150)
 from ..simulate.camera import PRESETS, preset_model
 from ..simulate.dataset import Settings, write_dataset
 from ..simulate.poses import default_distance_range, random_poses
@@ -54,6 +56,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="leave out the identity frames (each element's index, shown after the rotating-star frames) and "
         "render the sequence without them, as rotstar-pattern --no-identity writes it; with --pattern, the "
         "dataset's pattern.json then lists no identity frames either",
+    )
+    p.add_argument(
+        "--paper-sequence",
+        action="store_true",
+        help="without --pattern: the paper's whole sequence (rotstar-pattern --paper-sequence: phase shifts along "
+        "x and y, the checkerboard, the 16-segment star); with --pattern, the sequence is the pattern.json's",
     )
     p.add_argument(
         "--screen-png",
@@ -118,6 +126,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--jobs must be at least 1")
     if args.value_bits is not None and not 1 <= args.value_bits <= args.bits:
         p.error(f"--value-bits must be between 1 and --bits ({args.bits})")
+    if args.paper_sequence and args.pattern:
+        p.error("--paper-sequence is for the default screen; with --pattern the sequence is the pattern.json's")
     if args.screen_png and not args.pattern:
         p.error("--screen-png needs --pattern DIR")
     if not all(math.isfinite(v) for v in (args.blur, args.noise, args.shot, args.gain, args.black, args.room,
@@ -183,7 +193,7 @@ def _main(argv=None) -> int:
             if not args.identity:
                 layout = dataclasses.replace(layout, identity=False)
         else:
-            layout = make_layout(identity=args.identity)
+            layout = make_layout(identity=args.identity, **(PAPER_SEQUENCE if args.paper_sequence else {}))
         model, camera = load_camera(args.camera)
         check_output_path(args.out, folder=True)
         if args.pattern and os.path.realpath(args.out) == os.path.realpath(

@@ -87,21 +87,71 @@ def detect_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, 
         p = dataset.load_pose(seq, pose, pattern_frames)
     except dataset.DatasetError as e:
         return PoseResult(pose, fn, None, str(e))
+    opts = dict(opts)
+    name = opts.pop("method", "rotstar")
     r = detect_pose(p.rotstar, layout, full_scale=p.full_scale, checkerboard=p.checkerboard,
                     identity=p.identity, **opts)
+    if name != "rotstar" and r.found:
+        r = started_from_rotstar(name, r, p, layout)
     return PoseResult(pose, p.first_file, r, r.error, (p.rotstar.shape[2], p.rotstar.shape[1]))
 
 
+def started_from_rotstar(name: str, r: PoseCorners, p: dataset.Pose, layout: Layout) -> PoseCorners:
+    """rotstar's corners r of pose p moved by method `name` (methods.METHODS, start='rotstar'), rotstar's windows
+
+    The result keeps rotstar's windows, display offsets and motion (the
+    dataset's motion check), and has the method's per-corner reasons; no
+    covariance (--weights are rotstar's).
+    """
+    from ..methods import PoseImages, method
+
+    f = method(name)(PoseImages(layout, p.full_scale, frames=p.rotstar, identity=p.identity,
+                                checkerboard=p.checkerboard, phase=p.phase, star=p.star,
+                                start=r.corners, start_window=r.window))
+    if f.corners is None:
+        return dataclasses.replace(r, error=f"{name}: {f.why}", sigma=None, cov=None)
+    reasons = f.reasons if f.reasons is not None else np.where(np.isfinite(f.corners[..., 0]), "",
+                                                               f"{name}: not refined").astype(object)
+    return dataclasses.replace(r, corners=f.corners, reasons=reasons, sigma=None, cov=None)
+
+
+def method_available(layout: Layout, name: str) -> str:
+    """'' or why the dataset's sequence cannot give method `name`'s corners (one line)
+
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> method_available(make_layout(screen=(800, 600), pitch=100, band=24), "star")[:48]
+    'the sequence has no star frame (it was recorded '
+    """
+    from ..methods import method
+
+    m = method(name)
+    if m.needs == "phase" and not layout.phase or m.needs == "star" and not layout.star_segments:
+        what = "phase-shift frames" if m.needs == "phase" else "star frame"
+        return (f"the sequence has no {what} (it was recorded without rotstar-pattern --paper-sequence): "
+                f"--method {name} cannot run; the rotating-star corners are still available with the default "
+                f"--method rotstar")
+    if m.start != "rotstar" and name != "rotstar":
+        return f"--method {name} finds its own board; rotstar-detect runs the methods that start from rotstar's corners"
+    return ""
+
+
 def detect_dataset(seq: str, *, window: float = 10.0, refine: str = "symmetric", max_motion: float = MAX_MOTION,
-                   jobs: int = 1, poses: list[str] | None = None, progress=None) -> DatasetCorners:
+                   jobs: int = 1, poses: list[str] | None = None, progress=None,
+                   method: str = "rotstar") -> DatasetCorners:
     """Detect every pose of seq, then check the frames' motion over the dataset; see the module doc
 
-    Raises dataset.DatasetError when the dataset cannot be read at all.
+    method: 'rotstar', or a method of the registry that starts from rotstar's
+    corners (methods.METHODS: 'phase', 'star', 'cornersubpix', 'saddle'),
+    run on every pose rotstar found. Raises dataset.DatasetError when the
+    dataset cannot be read at all or its sequence lacks the method's frames.
     """
     pattern, layout = dataset.read_pattern(seq)
+    why = method_available(layout, method)
+    if why:
+        raise dataset.DatasetError(f"{dataset.pattern_file(seq)}: {why}")
     frames = pattern["frames"]
     poses = dataset.list_poses(seq, frames) if poses is None else poses
-    opts = dict(window=window, refine=refine, max_motion=max_motion)
+    opts = dict(window=window, refine=refine, max_motion=max_motion, method=method)
     done: dict[str, PoseResult] = {}
 
     def finish(r: PoseResult):

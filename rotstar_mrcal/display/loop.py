@@ -72,6 +72,18 @@ def frame_level(layout: Layout, frame: dict) -> float:
         x0, y0, x1, y1 = layout.board_extent()
         white = int(layout.identity_code.frame_bits(int(frame["index"])).sum()) * (2 * layout.half_element) ** 2
         return (layout.background * (W * H - (x1 - x0) * (y1 - y0)) + white) / (W * H)
+    if kind == "phase":  # the fringe inside the board's outline: a 1-D profile times the outline's other side
+        from ..pattern.render import phase_profile
+
+        x0, y0, x1, y1 = layout.board_extent()
+        if frame["axis"] == "x":
+            inside = phase_profile(layout, "x", int(frame["step"]), W)[x0:x1].sum() * (y1 - y0)
+        else:
+            inside = phase_profile(layout, "y", int(frame["step"]), H)[y0:y1].sum() * (x1 - x0)
+        return (layout.background * (W * H - (x1 - x0) * (y1 - y0)) + inside) / (W * H)
+    if kind == "star":  # every cell half white: a reflection across its x axis swaps the colours
+        cells = layout.nx * layout.ny * layout.pitch**2
+        return (layout.background * (W * H - cells) + 0.5 * cells) / (W * H)
     if kind == "checkerboard":
         na, nb = layout.nx + 1, layout.ny + 1
         black = sum(1 for a in range(na) for b in range(nb) if (a + b) % 2 == 0)

@@ -36,6 +36,7 @@ import math
 import numpy as np
 
 PATTERN_FORMAT = "rotstar-pattern/1"
+PHASE_STEPS = 4  # the phase-shift frames per axis, shifted by 2 pi / PHASE_STEPS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,6 +56,9 @@ class Layout:
     marker: tuple[int, int] = (0, 0)
     background: float = 0.5
     identity: bool = False  # identity frames after the rotating-star frames (pattern/identity.py)
+    phase_period: float = 0.0  # 4-step phase-shift fringes along x and y, period in display pixels (0: none)
+    phase_origin: tuple[float, float] | None = None  # display point of phase 0 (None: corner (0, 0))
+    star_segments: int = 0  # Schops et al.'s star per corner after the checkerboard, segments (0: none)
 
     # ---- derived geometry -------------------------------------------------
     @property
@@ -122,8 +126,31 @@ class Layout:
 
         return IdentityCode.for_grid(self.nx, self.ny) if self.identity else None
 
+    @property
+    def phase(self) -> bool:
+        """Whether the sequence holds the phase-shift frames"""
+        return self.phase_period > 0
+
+    @property
+    def phase_zero(self) -> tuple[float, float]:
+        """The display point (x, y) where both fringes have phase 0"""
+        return tuple(float(v) for v in (self.origin if self.phase_origin is None else self.phase_origin))
+
+    def corner_phase(self) -> np.ndarray:
+        """(ny, nx, 2) the phases (along x, along y) of the fringes at the corners, radians in [0, 2 pi)
+
+        SYNOPSIS
+
+            >>> L = make_layout(screen=(800, 600), pitch=100, band=24, phase_period=40)
+            >>> L.corner_phase()[0, :3, 0].round(4).tolist()      # corners 100 px apart, period 40
+            [0.0, 3.1416, 0.0]
+        """
+        d = self.corner_screen_xy() - np.array(self.phase_zero)
+        return np.mod(2 * math.pi * d / self.phase_period, 2 * math.pi)
+
     def frames(self) -> list[dict]:
-        """The display sequence: nframes rotating-star frames, the identity frames, then the checkerboard"""
+        """The display sequence, in the paper's order: the rotating-star frames, the identity frames,
+        the phase shifts along x then y, the checkerboard, the star"""
         out = [
             {
                 "file": f"rotstar_{k:02d}.png",
@@ -144,7 +171,33 @@ class Layout:
                 "encodes": f"bit {b} of every element's codeword (identity.codewords): the element's square "
                            "white for 1, black for 0; border bands black",
             })
+        if self.phase:
+            for axis in "xy":
+                for n in range(PHASE_STEPS):
+                    out.append({
+                        "file": f"phase_{axis}_{n}.png",
+                        "kind": "phase",
+                        "axis": axis,
+                        "step": n,
+                        "shift_rad": n * 2 * math.pi / PHASE_STEPS,
+                        "period_px": self.phase_period,
+                        "phase_origin": list(self.phase_zero),
+                        "encodes": f"linear luminance 0.5 + 0.5 cos(2 pi ({axis} - phase_origin.{axis}) / period_px "
+                                   f"+ shift_rad) at display pixel centres {axis}, inside the board's outline "
+                                   "(background outside)",
+                    })
         out.append({"file": "checkerboard.png", "kind": "checkerboard"})
+        if self.star_segments:
+            out.append({
+                "file": "star.png",
+                "kind": "star",
+                "segments": self.star_segments,
+                "cell_px": self.pitch,
+                "first_edge_rad": 0.0,
+                "encodes": "every corner the centre of a star of `segments` black/white wedges filling the "
+                           "pitch x pitch cell around it; wedge 0 (from the first edge toward +y) black at "
+                           "corners with i + j even, colours inverted where i + j is odd",
+            })
         return out
 
     def to_dict(self) -> dict:
@@ -228,11 +281,16 @@ def make_layout(
     nx: int | None = None,
     ny: int | None = None,
     identity: bool = True,
+    phase_period: float = 0.0,
+    star_segments: int = 0,
 ) -> Layout:
     """Fit the largest grid of the given pitch on the screen
 
     identity: show the identity frames (each element's index in time) after
-    the rotating-star frames. The baseline checkerboard has (nx+1) x (ny+1) squares of side pitch and
+    the rotating-star frames. phase_period > 0 adds the 4-step phase shifts
+    along x and y (fringes of that period, display pixels, phase 0 at corner
+    (0, 0)), star_segments > 0 the star of Schops et al. with that many
+    segments after the checkerboard (the paper's sequence: pitch and 16). The baseline checkerboard has (nx+1) x (ny+1) squares of side pitch and
     needs a quiet zone of at least `quiet` display pixels on each side; nx and
     ny default to the most that fit. The grid is centred on the screen.
     """
@@ -256,6 +314,7 @@ def make_layout(
             IdentityCode.for_grid(nx, ny)
         except ValueError as e:
             raise ValueError(f"{e}: leave the identity frames out, or use fewer corners") from None
+    check_extras(phase_period, star_segments)
     origin = ((W - (nx - 1) * pitch) // 2, (H - (ny - 1) * pitch) // 2)
     return Layout(
         screen_width=W,
@@ -270,7 +329,20 @@ def make_layout(
         step=step,
         marker=choose_marker(nx, ny),
         identity=identity,
+        phase_period=float(phase_period),
+        star_segments=int(star_segments),
     )
+
+
+MIN_PHASE_PERIOD = 4  # display pixels: a shorter period is barely a sinusoid on the display's pixels
+
+
+def check_extras(phase_period: float, star_segments: int) -> None:
+    """ValueError unless the phase period and the star's segments are usable (0 = the frames left out)"""
+    if phase_period and not (math.isfinite(phase_period) and phase_period >= MIN_PHASE_PERIOD):
+        raise ValueError(f"phase period {phase_period:g}; must be at least {MIN_PHASE_PERIOD} display pixels")
+    if star_segments and (star_segments % 4 or not 4 <= star_segments <= 64):
+        raise ValueError(f"star segments {star_segments}; must be a multiple of 4 between 4 and 64")
 
 
 MAX_SCREEN = 100_000  # display pixels; sanity bounds of pattern.json's values
@@ -302,7 +374,7 @@ def _get(d: dict, field: str, default=None, kind=int, lo=None, hi=None):
     return kind(v)
 
 
-FRAME_KINDS = ("rotstar", "identity", "checkerboard")
+FRAME_KINDS = ("rotstar", "identity", "phase", "checkerboard", "star")
 
 
 def _check_frames(frames) -> int:
@@ -344,6 +416,65 @@ def _check_identity(d: dict, nx: int, ny: int) -> bool:
         raise ValueError(f"frames: identity frames with indices {idx[:20]}; the {nx}x{ny} grid's code needs "
                          f"0..{code.nframes - 1} in order")
     return True
+
+
+def _field(f: dict, k: int, key: str, default=None, **kw):
+    """frames[k].key, checked like _get (ValueError naming frames[k].key)"""
+    return _get({f"frames[{k}]": f}, f"frames[{k}].{key}", default, **kw)
+
+
+def _check_phase(frames: list[dict]) -> tuple[float, tuple[float, float] | None]:
+    """(period, origin) of the phase-shift frames, or (0, None) without them; ValueError naming the field"""
+    idx = [k for k, f in enumerate(frames) if f["kind"] == "phase"]
+    if not idx:
+        return 0.0, None
+    period = origin = None
+    steps = {"x": [], "y": []}
+    for k in idx:
+        f = frames[k]
+        if f.get("axis") not in steps:
+            raise ValueError(f"frames[{k}].axis is {json.dumps(f.get('axis'))[:40]}; must be \"x\" or \"y\"")
+        n = _field(f, k, "step", lo=0, hi=PHASE_STEPS - 1)
+        shift = _field(f, k, "shift_rad", kind=float)
+        if abs(shift - n * 2 * math.pi / PHASE_STEPS) > 1e-9:
+            raise ValueError(f"frames[{k}].shift_rad is {shift:g}; step {n} of {PHASE_STEPS} is "
+                             f"{n * 2 * math.pi / PHASE_STEPS:g}")
+        p = _field(f, k, "period_px", kind=float, lo=MIN_PHASE_PERIOD, hi=MAX_SCREEN)
+        o = f.get("phase_origin")
+        if not isinstance(o, list) or len(o) != 2:
+            raise ValueError(f"frames[{k}].phase_origin is {json.dumps(o)[:40]}; must be [x, y]")
+        o = (_get({"o": {"x": o[0]}}, "o.x", kind=float, lo=-MAX_SCREEN, hi=MAX_SCREEN),
+             _get({"o": {"y": o[1]}}, "o.y", kind=float, lo=-MAX_SCREEN, hi=MAX_SCREEN))
+        if period is not None and (p != period or o != origin):
+            raise ValueError(f"frames[{k}]: period_px {p:g} and phase_origin {list(o)} differ from the first phase "
+                             f"frame's ({period:g}, {list(origin)})")
+        period, origin = p, o
+        steps[f["axis"]].append(n)
+    for axis, got in steps.items():
+        if got != list(range(PHASE_STEPS)):
+            raise ValueError(f"frames: the phase frames along {axis} have steps {got}; need "
+                             f"{list(range(PHASE_STEPS))} in order")
+    return period, origin
+
+
+def _check_star(frames: list[dict], pitch: int) -> int:
+    """The star frame's segments, or 0 without one; ValueError naming the field"""
+    idx = [k for k, f in enumerate(frames) if f["kind"] == "star"]
+    if not idx:
+        return 0
+    if len(idx) > 1:
+        raise ValueError(f"frames[{idx[1]}]: a second star frame; the sequence has one")
+    k = idx[0]
+    n = _field(frames[k], k, "segments", lo=4, hi=64)
+    if n % 4:
+        raise ValueError(f"frames[{k}].segments is {n}; must be a multiple of 4 (point-symmetric, black and white "
+                         "alternating)")
+    cell = _field(frames[k], k, "cell_px", pitch, lo=2, hi=MAX_SCREEN)
+    if cell != pitch:
+        raise ValueError(f"frames[{k}].cell_px is {cell}; the star's cells are the grid's pitch, {pitch}")
+    if _field(frames[k], k, "first_edge_rad", 0.0, kind=float) != 0.0:
+        raise ValueError(f"frames[{k}].first_edge_rad must be 0 (an edge along the grid's x axis)")
+    return n
 
 
 def layout_from_dict(d: dict) -> Layout:
@@ -397,7 +528,12 @@ def layout_from_dict(d: dict) -> Layout:
         marker=(_get(m, "element.marker.i", lo=0, hi=nx - 1), _get(m, "element.marker.j", lo=0, hi=ny - 1)),
         background=_get(d, "element.background", 0.5, kind=float, lo=0.0, hi=1.0),
         identity=_check_identity(d, nx, ny),
+        star_segments=_check_star(d["frames"], pitch),
     )
+    period, porigin = _check_phase(d["frames"])
+    if period:
+        layout = dataclasses.replace(layout, phase_period=period,
+                                     phase_origin=None if porigin == tuple(map(float, layout.origin)) else porigin)
     x0, y0, x1, y1 = layout.board_extent()
     if x0 < 0 or y0 < 0 or x1 > W or y1 > H:
         raise ValueError(f"grid: {nx}x{ny} corners at pitch {pitch} from origin {tuple(layout.origin)} do not fit "

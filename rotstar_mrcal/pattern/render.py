@@ -137,8 +137,117 @@ def render_checkerboard(layout: Layout) -> np.ndarray:
     return img
 
 
+def phase_profile(layout: Layout, axis: str, step: int, length: int) -> np.ndarray:
+    """(length,) the fringe of phase-shift frame (axis, step) at display pixel centres 0.5, 1.5, ... along axis
+
+    Linear luminance 0.5 + 0.5 cos(phi + step 2 pi / 4), phi = 2 pi (u + 0.5 - phase_origin) / period:
+    the light the screen emits is this sinusoid once encode_display has
+    pre-compensated the display gamma (the PNG values are not sinusoidal).
+
+    SYNOPSIS
+
+        >>> from rotstar_mrcal.pattern.layout import make_layout
+        >>> L = make_layout(screen=(800, 600), pitch=100, band=24, phase_period=100)
+        >>> p = [phase_profile(L, "x", n, 800) for n in range(4)]
+        >>> x0 = L.origin[0]                       # corner (0, 0) lies on the pixel boundary at x0
+        >>> phi = np.arctan2(p[3] - p[1], p[0] - p[2])
+        >>> np.round(phi[x0 - 1 : x0 + 1] * 100 / (2 * np.pi), 6).tolist()   # +-0.5 px from phase 0
+        [-0.5, 0.5]
+    """
+    from .layout import PHASE_STEPS
+
+    o = layout.phase_zero[0 if axis == "x" else 1]
+    phi = 2 * np.pi * (np.arange(length) + 0.5 - o) / layout.phase_period
+    return 0.5 + 0.5 * np.cos(phi + step * 2 * np.pi / PHASE_STEPS)
+
+
+def render_phase(layout: Layout, axis: str, step: int) -> np.ndarray:
+    """Phase-shift frame `step` along `axis` ("x": fringes vary with x) inside the board's outline
+
+    The fringes fill the board's outline (the border bands' outer edge, as in
+    the rotating-star frames); outside it the screen is the background.
+    """
+    if not layout.phase:
+        raise ValueError("the layout has no phase-shift frames")
+    img = np.full((layout.screen_height, layout.screen_width), layout.background)
+    x0, y0, x1, y1 = layout.board_extent()
+    if axis == "x":
+        img[y0:y1, x0:x1] = phase_profile(layout, "x", step, layout.screen_width)[None, x0:x1]
+    elif axis == "y":
+        img[y0:y1, x0:x1] = phase_profile(layout, "y", step, layout.screen_height)[y0:y1, None]
+    else:
+        raise ValueError(f"phase axis {axis!r}; must be x or y")
+    return img
+
+
+def star_coverage(dx: np.ndarray, dy: np.ndarray, segments: int) -> np.ndarray:
+    """White area fraction of pixels centred at (dx, dy) around the centre of a star of `segments` wedges
+
+    Wedge k runs from angle 2 pi k / segments to 2 pi (k + 1) / segments
+    (from screen x toward screen y) and is black for even k, so segments = 4
+    is checker_coverage at theta = 0. The colour is an XOR of the half-planes
+    of the segments / 2 lines through the centre: exact area fractions where at
+    most one line crosses a pixel, 64 x 64 supersampling where more do.
+
+    SYNOPSIS
+
+        >>> d = np.arange(-3, 3) + 0.5
+        >>> dy, dx = np.meshgrid(d, d, indexing="ij")
+        >>> bool(np.allclose(star_coverage(dx, dy, 4), checker_coverage(dx, dy, 0.0)))
+        True
+        >>> float(star_coverage(dx, dy, 16).mean())          # a square around the centre: half white
+        0.5
+    """
+    n = segments // 2
+    theta = np.pi * np.arange(n) / n
+    prod = np.ones(np.broadcast(dx, dy).shape)
+    fractional = np.zeros(prod.shape, int)
+    for t in theta:  # p = area of the pixel where sin(angle - t) > 0
+        p = _halfplane_coverage(-np.sin(t) * dx + np.cos(t) * dy, abs(np.sin(t)), abs(np.cos(t)))
+        prod = prod * (1 - 2 * p)
+        fractional += (p > 1e-9) & (p < 1 - 1e-9)
+    out = (1 + prod) / 2
+    many = fractional > 1
+    if np.any(many):
+        m = CENTRE_SUPERSAMPLING
+        s = (np.arange(m) + 0.5) / m - 0.5
+        sy, sx = np.meshgrid(s, s, indexing="ij")
+        px = np.broadcast_to(dx, out.shape)[many][:, None, None] + sx
+        py = np.broadcast_to(dy, out.shape)[many][:, None, None] + sy
+        sign = np.ones(px.shape)
+        for t in theta:  # trigonometry rounded so that the diagonals hit the samples on them exactly
+            sign = sign * np.sign(np.round(np.cos(t), 12) * py - np.round(np.sin(t), 12) * px)
+        out[many] = np.mean((1 + sign) / 2, axis=(-1, -2))  # a sample on a line counts half
+    return out
+
+
+def render_star(layout: Layout) -> np.ndarray:
+    """The star frame of Schops et al.: every corner the centre of a star filling its pitch x pitch cell
+
+    The cells tile the grid without gaps (corner (i, j)'s cell is the square
+    of side pitch centred on it); colours are inverted where i + j is odd, so
+    that the wedges continue across the cells' edges (with 4 segments this is
+    the checkerboard). Outside the cells the screen is the background.
+    """
+    if not layout.star_segments:
+        raise ValueError("the layout has no star frame")
+    h = layout.pitch // 2
+    oy, ox = np.mgrid[-h:h, -h:h]
+    w = star_coverage(ox + 0.5, oy + 0.5, layout.star_segments)
+    img = np.full((layout.screen_height, layout.screen_width), layout.background)
+    c = layout.corner_screen_xy().astype(int)
+    j, i = np.mgrid[0 : layout.ny, 0 : layout.nx]
+    cells = np.where(((i + j) % 2 == 1)[..., None, None], 1 - w, w)
+    img[c[..., 1, None, None] + oy, c[..., 0, None, None] + ox] = cells
+    return img
+
+
 def render_frame(layout: Layout, frame: dict) -> np.ndarray:
     """Render one entry of layout.frames()"""
+    if frame["kind"] == "phase":
+        return render_phase(layout, frame["axis"], int(frame["step"]))
+    if frame["kind"] == "star":
+        return render_star(layout)
     if frame["kind"] == "rotstar":
         return render_rotstar(layout, int(frame["index"]))
     if frame["kind"] == "identity":
