@@ -131,6 +131,8 @@ def _main(argv=None) -> int:
                 from ..methods import reason_counts
 
                 why = f" ({a.method}: {reason_counts(r.corners.reasons)})"
+            elif r.corners.n_valid < layout.nx * layout.ny:
+                why = f" ({r.corners.missing_summary()})"
             progress.step(r.pose, f"{r.corners.n_valid} of {layout.nx * layout.ny} corners{why}")
         else:
             progress.step(r.pose, f"skipped: {r.error}", important=True)

@@ -73,6 +73,32 @@ class PoseCorners:
     def n_valid(self) -> int:
         return int(np.isfinite(self.corners[..., 0]).sum())
 
+    def missing_summary(self) -> str:
+        """Why corners are missing, in a few words
+
+        >>> r = PoseCorners(np.full((1, 5, 2), np.nan), reasons=np.array([["", "", "", "a (3 px)", "a (5 px)"]], object),
+        ...                 unplaced=["identity unreadable: 5 white frames"])
+        >>> r.corners[0, :1] = 1.0
+        >>> r.missing_summary()
+        '1 not in view or hidden, 2 dropped (2 a), 1 identity not read'
+        """
+        import re
+
+        missing = ~np.isfinite(self.corners[..., 0])
+        why = self.reasons[missing] if self.reasons is not None else np.zeros(0, object)
+        named = [re.sub(r" \(.*\)$", "", str(w)) for w in why if w]
+        out = []
+        unnamed = int(missing.sum()) - len(named) - len(self.unplaced or [])
+        if unnamed > 0:
+            out.append(f"{unnamed} not in view or hidden")
+        if named:
+            kinds, counts = np.unique(named, return_counts=True)
+            top = ", ".join(f"{c} {k}" for k, c in sorted(zip(kinds, counts), key=lambda kc: -kc[1])[:2])
+            out.append(f"{len(named)} dropped ({top})")
+        if self.unplaced:
+            out.append(f"{len(self.unplaced)} identity not read")
+        return ", ".join(out)
+
     def weights(self) -> np.ndarray:
         """(ny, nx) 1/sigma per corner from the refinement covariance, median 1
 
