@@ -38,6 +38,17 @@ class Elements:
         return np.array([inscribed_square(c, m) for c, m in zip(self.contours, self.centroids)])
 
 
+def on_border(points: np.ndarray, shape) -> np.ndarray:
+    """(M,) bool: which of the pixel points (M, 2) lie on the image's outermost rows or columns
+
+        >>> on_border(np.array([[0, 5], [3, 4], [9, 2]]), (6, 10)).tolist()
+        [True, False, True]
+    """
+    H, W = shape
+    p = np.asarray(points)
+    return (p[:, 0] <= 0) | (p[:, 1] <= 0) | (p[:, 0] >= W - 1) | (p[:, 1] >= H - 1)
+
+
 def inscribed_square(contour: np.ndarray, centre: np.ndarray) -> float:
     """Half-side of the largest axis-aligned square centred at centre inside contour"""
     d = np.abs(np.asarray(contour, float) - centre)
@@ -65,8 +76,5 @@ def element_boundaries(mask: np.ndarray, min_area: float = 12.0, min_rel_area: f
     moments = [m for m, k in zip(moments, keep) if k]
     centroids = np.array([(m["m10"] / m["m00"], m["m01"] / m["m00"]) for m in moments]).reshape(-1, 2)
     lattice = contours[ilat][:, 0, :]
-    H, W = mask.shape
-    touches = bool(
-        (lattice[:, 0].min() <= 0) | (lattice[:, 1].min() <= 0) | (lattice[:, 0].max() >= W - 1) | (lattice[:, 1].max() >= H - 1)
-    )
+    touches = bool(on_border(lattice, mask.shape).any())
     return Elements(cs, centroids, areas[keep], lattice, touches)

@@ -34,12 +34,18 @@ TOLERANCE = 0.3  # grid steps
 OFFSETS = np.array([(di, dj) for dj in (-1, 0, 1) for di in (-1, 0, 1) if di or dj])
 
 
+def _label_table(labels: np.ndarray, pad: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(table, lo): table[j - lo[1], i - lo[0]] is the index of label (i, j), -1 where none; pad: margin of -1"""
+    lo = labels.min(axis=0) - pad
+    nx, ny = labels.max(axis=0) - lo + 1 + pad
+    table = np.full((ny, nx), -1)
+    table[labels[:, 1] - lo[1], labels[:, 0] - lo[0]] = np.arange(len(labels))
+    return table, lo
+
+
 def _neighbour_table(labels: np.ndarray) -> np.ndarray:
     """(N, 8) index of the element at label + OFFSETS[k], -1 where none"""
-    lo = labels.min(axis=0) - 1
-    shape = labels.max(axis=0) - lo + 2
-    table = np.full((shape[1], shape[0]), -1)
-    table[labels[:, 1] - lo[1], labels[:, 0] - lo[0]] = np.arange(len(labels))
+    table, lo = _label_table(labels, pad=1)
     q = labels[:, None, :] + OFFSETS[None] - lo
     return table[q[..., 1], q[..., 0]]
 
@@ -108,9 +114,7 @@ def projective_offsets(labels: np.ndarray, points: np.ndarray, radius: int = 2) 
     labels = np.asarray(labels, int)
     points = np.asarray(points, float)
     out = np.full(len(labels), np.nan)
-    lo = labels.min(axis=0)
-    table = np.full(tuple(labels.max(axis=0) - lo + 1)[::-1], -1)
-    table[labels[:, 1] - lo[1], labels[:, 0] - lo[0]] = np.arange(len(labels))
+    table, lo = _label_table(labels)
     for e, (i, j) in enumerate(labels - lo):
         win = table[max(j - radius, 0) : j + radius + 1, max(i - radius, 0) : i + radius + 1].ravel()
         nb = win[(win >= 0) & (win != e)]

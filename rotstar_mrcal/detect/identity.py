@@ -38,7 +38,8 @@ import cv2
 import numpy as np
 
 from ..pattern.identity import IdentityCode
-from .boundaries import inscribed_square
+from .boundaries import inscribed_square, on_border
+from .response import pixel_noise
 
 MAP_THRESHOLD = 0.7
 SPLIT_THRESHOLD = 0.85  # inside regions whose code is unreadable: the bands closed by blur or saturation
@@ -53,16 +54,22 @@ class Identities:
 
     contours: list  # (M, 2) int boundary of each element region
     centroids: np.ndarray  # (N, 2)
-    areas: np.ndarray  # (N,)
     touches_edge: np.ndarray  # (N,) bool: the region reaches the image border
+    inscribed: np.ndarray  # (N,) half-side of the largest axis-aligned square about the centroid
     index: np.ndarray  # (N,) element index j * nx + i, -1 where not read
     reason: np.ndarray  # (N,) '' or why the code was not read
-    inscribed: np.ndarray  # (N,) half-side of the largest axis-aligned square about the centroid
-    mask: np.ndarray  # (H, W) uint8, the element regions
 
     def labels(self, nx: int) -> np.ndarray:
         """(N, 2) (i, j) of every element (-1, -1 where not read)"""
         return np.where(self.index[:, None] >= 0, np.stack((self.index % nx, self.index // nx), axis=-1), -1)
+
+    def without(self, drop: np.ndarray, other: "Identities") -> "Identities":
+        """These elements less those at indices `drop`, followed by other's"""
+        keep = np.ones(len(self.index), bool)
+        keep[drop] = False
+        arrays = {f.name: np.concatenate((getattr(self, f.name)[keep], getattr(other, f.name)))
+                  for f in dataclasses.fields(self) if f.name != "contours"}
+        return Identities([c for c, k in zip(self.contours, keep) if k] + other.contours, **arrays)
 
 
 def identity_map(rotstar: np.ndarray, identity: np.ndarray) -> np.ndarray:
@@ -81,19 +88,14 @@ def identity_map(rotstar: np.ndarray, identity: np.ndarray) -> np.ndarray:
 
 
 def element_regions(mask: np.ndarray, min_area: float = MIN_AREA):
-    """(contours, centroids, areas, touches_edge) of the connected regions of a binary mask"""
+    """(contours, centroids, touches_edge) of the connected regions of a binary mask"""
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    cs = [c[:, 0, :] for c in contours]
-    moments = [cv2.moments(c) for c in cs]
-    keep = [m["m00"] >= min_area for m in moments]
-    cs = [c for c, k in zip(cs, keep) if k]
-    moments = [m for m, k in zip(moments, keep) if k]
-    centroids = np.array([(m["m10"] / m["m00"], m["m01"] / m["m00"]) for m in moments]).reshape(-1, 2)
-    areas = np.array([m["m00"] for m in moments])
-    H, W = mask.shape
-    edge = np.array([bool((c[:, 0].min() <= 0) | (c[:, 1].min() <= 0) | (c[:, 0].max() >= W - 1)
-                          | (c[:, 1].max() >= H - 1)) for c in cs], bool)
-    return cs, centroids, areas, edge
+    moments = [(c[:, 0, :], cv2.moments(c)) for c in contours]
+    moments = [(c, m) for c, m in moments if m["m00"] >= min_area]
+    cs = [c for c, _ in moments]
+    centroids = np.array([(m["m10"] / m["m00"], m["m01"] / m["m00"]) for _, m in moments]).reshape(-1, 2)
+    edge = np.array([on_border(c, mask.shape).any() for c in cs], bool)
+    return cs, centroids, edge
 
 
 def element_levels(identity: np.ndarray, centres: np.ndarray, halfsides: np.ndarray) -> np.ndarray:
@@ -107,20 +109,15 @@ def element_levels(identity: np.ndarray, centres: np.ndarray, halfsides: np.ndar
     return identity[:, y, x].mean(axis=-1).T  # (N, nf)
 
 
-def pixel_noise(frames: np.ndarray) -> float:
-    """Robust standard deviation of one pixel, from horizontal neighbour differences of two frames"""
-    d = np.diff(np.asarray(frames[:2, ::8, :], np.float32), axis=-1)
-    return max(float(np.median(np.abs(d - np.median(d)))) * 1.4826 / np.sqrt(2), 0.3)
-
-
-def _read(mask, identity, code, noise):
-    cs, centroids, areas, edge = element_regions(mask)
+def _read(mask, identity, code, noise) -> Identities:
+    """The elements of the regions of mask, and their codes"""
+    cs, centroids, edge = element_regions(mask)
     inscribed = np.array([inscribed_square(c, m) for c, m in zip(cs, centroids)]).reshape(-1)
-    if not cs:
-        return cs, centroids, areas, edge, inscribed, np.zeros(0, int), np.zeros(0, object)
-    levels = element_levels(identity, centroids, np.maximum(inscribed, 0.5))
-    index, reason = code.decode(levels, noise=noise)
-    return cs, centroids, areas, edge, inscribed, index, reason
+    if cs:
+        index, reason = code.decode(element_levels(identity, centroids, np.maximum(inscribed, 0.5)), noise=noise)
+    else:
+        index, reason = np.zeros(0, int), np.zeros(0, object)
+    return Identities(cs, centroids, edge, inscribed, index, reason)
 
 
 def read_identities(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCode) -> Identities:
@@ -129,27 +126,20 @@ def read_identities(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCod
     if len(identity) != code.nframes:
         raise ValueError(f"{len(identity)} identity frames; the code has {code.nframes}")
     imap = identity_map(rotstar, identity)
-    mask = (imap > MAP_THRESHOLD).astype(np.uint8)
     noise = pixel_noise(identity) / SAMPLES  # of the mean of SAMPLES^2 pixels
-    parts = [list(_read(mask, identity, code, noise))]
+    ids = _read((imap > MAP_THRESHOLD).astype(np.uint8), identity, code, noise)
     # regions whose code reads as neither: two elements joined across a band closed by blur or
     # saturation? The band is darker in the map than the elements: split them at SPLIT_THRESHOLD
-    failed = np.flatnonzero(parts[0][5] < 0)
+    failed = np.flatnonzero(ids.index < 0)
     if len(failed):
-        inside = np.zeros_like(mask)
-        cv2.drawContours(inside, [parts[0][0][k].reshape(-1, 1, 2) for k in failed], -1, 1, cv2.FILLED)
-        split = list(_read(inside & (imap > SPLIT_THRESHOLD).astype(np.uint8), identity, code, noise))
-        if (split[5] >= 0).any():
-            keep = np.ones(len(parts[0][0]), bool)
-            keep[failed] = False
-            parts = [[[c for c, k in zip(v, keep) if k] if isinstance(v, list) else v[keep] for v in parts[0]],
-                     split]
-    cs = [c for p in parts for c in p[0]]
-    centroids, areas, edge, inscribed, index, reason = (
-        np.concatenate([p[k] for p in parts]) for k in range(1, 7))
+        inside = np.zeros(imap.shape, np.uint8)
+        cv2.drawContours(inside, [ids.contours[k].reshape(-1, 1, 2) for k in failed], -1, 1, cv2.FILLED)
+        split = _read(inside & (imap > SPLIT_THRESHOLD).astype(np.uint8), identity, code, noise)
+        if (split.index >= 0).any():
+            ids = ids.without(failed, split)
     # an index read twice names two places: neither can be trusted
-    uniq, counts = np.unique(index[index >= 0], return_counts=True)
-    twice = np.isin(index, uniq[counts > 1])
-    reason[twice] = "identity read in two places"
-    index = np.where(twice, -1, index)
-    return Identities(cs, centroids.reshape(-1, 2), areas, edge.astype(bool), index, reason, inscribed, mask)
+    uniq, counts = np.unique(ids.index[ids.index >= 0], return_counts=True)
+    twice = np.isin(ids.index, uniq[counts > 1])
+    ids.reason[twice] = "identity read in two places"
+    ids.index = np.where(twice, -1, ids.index)
+    return ids

@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 
 from ..pattern.layout import Layout
-from .boundaries import element_boundaries
+from .boundaries import element_boundaries, inscribed_square, on_border
 from .consistency import label_consistency, predict_from_neighbours
 from .identity import read_identities
 from .indexing import (GridError, checker_phase, contact_graph, frame_angles, grid_array, grid_labels,
@@ -67,11 +67,8 @@ def window_of(contour: np.ndarray, centre: np.ndarray, shape, window: float) -> 
     contour: the element's identity region, whose edge pixels lie about
     REGION_EDGE_PX inside the element's edge.
     """
-    H, W = shape
-    c = np.asarray(contour, float)
-    inner = (c[:, 0] > 0) & (c[:, 1] > 0) & (c[:, 0] < W - 1) & (c[:, 1] < H - 1)
-    c = c[inner] if inner.any() else c
-    half = float(np.min(np.max(np.abs(c - centre), axis=-1))) + REGION_EDGE_PX
+    inner = ~on_border(contour, shape)
+    half = inscribed_square(contour[inner] if inner.any() else contour, centre) + REGION_EDGE_PX
     return float(np.clip(WINDOW_FRACTION * half, MIN_WINDOW, window))
 
 
@@ -98,7 +95,7 @@ def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window
     H, W = frames.shape[1:]
     ids = read_identities(frames, identity, layout.identity_code)
     read = ids.index >= 0
-    unplaced = [r for r in ids.reason[~read]]
+    unplaced = list(ids.reason[~read])
     if read.sum() < 4:
         seen = len(ids.index)
         if seen == 0:

@@ -50,6 +50,7 @@ from .consistency import refined_consistency
 from .display import MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian
 from .labelled import by_graph, by_identity
 from .refine import refine_each_frame, symmetric_refine
+from .response import pixel_noise
 from .sequence import check_band_parity
 
 
@@ -135,8 +136,7 @@ def check_exposure(frames: np.ndarray, full_scale: float) -> str:
     if sat > 0.5:
         return f"saturated ({sat:.0%} of the pixels at full scale)"
     lo, hi = (float(v) for v in np.percentile(sub, [0.5, 99.5]))
-    d = np.diff(frames[:2, ::8, :], axis=-1)
-    noise = max(float(np.median(np.abs(d - np.median(d)))) * 1.4826 / np.sqrt(2), 0.3)  # >= quantisation
+    noise = pixel_noise(frames)
     if hi - lo < max(MIN_CONTRAST_NOISE * noise, MIN_LEVELS):
         what = "all dark" if hi < 0.25 * full_scale else "too noisy"
         return (f"{what} (no contrast above the noise: 0.5-99.5th percentiles {lo:.0f}-{hi:.0f} of "

@@ -168,6 +168,12 @@ def _normal(r, jx, jy):
     return JtJ, Jtr, cost
 
 
+def _frame_stack(frames) -> np.ndarray:
+    """(nframes, H, W) float32 of one frame (H, W) or a stack"""
+    frames = np.asarray(frames, np.float32)
+    return frames[None] if frames.ndim == 2 else frames
+
+
 def symmetric_refine(
     frames: np.ndarray,
     corners0: np.ndarray,
@@ -188,9 +194,7 @@ def symmetric_refine(
     sum_k sum_d [I_k(q + s_k + d) - I_k(q + s_k - d)]^2, and the corner
     returned is q (for frames that show the pattern displaced).
     """
-    frames = np.asarray(frames, np.float32)
-    if frames.ndim == 2:
-        frames = frames[None]
+    frames = _frame_stack(frames)
     q0 = np.asarray(corners0, float).reshape(-1, 2)
     N = len(q0)
     if shifts is not None:
@@ -216,9 +220,7 @@ def refine_each_frame(
     in frames], computed as one batch of nframes x N problems (each sample
     reads only its own problem's frame).
     """
-    frames = np.asarray(frames, np.float32)
-    if frames.ndim == 2:
-        frames = frames[None]
+    frames = _frame_stack(frames)
     nf = len(frames)
     q0 = np.asarray(corners0, float).reshape(-1, 2)
     N = len(q0)

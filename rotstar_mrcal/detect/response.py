@@ -32,6 +32,15 @@ import numpy as np
 FLOOR_FRACTION = 1 / 20
 
 
+def pixel_noise(frames: np.ndarray) -> float:
+    """Robust standard deviation of one pixel, from horizontal neighbour differences of two frames
+
+    At least 0.3, the quantisation's.
+    """
+    d = np.diff(np.asarray(frames[:2, ::8, :], np.float32), axis=-1)
+    return max(float(np.median(np.abs(d - np.median(d)))) * 1.4826 / np.sqrt(2), 0.3)
+
+
 def intensity_estimate(frames: np.ndarray) -> np.ndarray:
     """Per-pixel maximum over frames, floored at 1/20 of the global maximum"""
     m = frames[0].copy()
