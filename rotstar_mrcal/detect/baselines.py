@@ -57,6 +57,7 @@ __all__ = [
     "cone_kernel",
     "mrgingham_detect",
     "MrginghamNotInstalled",
+    "to_uint8",
 ]
 
 
@@ -90,7 +91,7 @@ def average_frames(frames) -> np.ndarray:
 # ---------------------------------------------------------------------------
 # OpenCV
 # ---------------------------------------------------------------------------
-def _to_uint8(image: np.ndarray, full_scale: float) -> np.ndarray:
+def to_uint8(image: np.ndarray, full_scale: float) -> np.ndarray:
     """Recorded units -> 8 bits, 0..full_scale mapped to 0..255"""
     img = np.asarray(image, np.float64) * (255.0 / float(full_scale))
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
@@ -195,7 +196,7 @@ def opencv_find_chessboard(image, nx: int, ny: int, full_scale: float = 255.0,
     (and run down first for a square board), so relabel with
     match_to_reference before comparing with anything.
     """
-    img8 = _to_uint8(image, full_scale)
+    img8 = to_uint8(image, full_scale)
     if img8.ndim != 2:
         raise ValueError(f"opencv_find_chessboard needs a 2-D image; got shape {img8.shape}")
     if method == "sb":

@@ -101,20 +101,18 @@ def render_charuco(layout: Layout) -> np.ndarray:
     return img
 
 
-def to_8bit(image, full_scale: float) -> np.ndarray:
-    """An image of values 0..full_scale (any dtype, e.g. a float average of captures) as uint8, rounded"""
-    return np.clip(np.round(np.asarray(image, np.float64) * (255.0 / full_scale)), 0, 255).astype(np.uint8)
-
-
 def detect_charuco(image, layout: Layout, full_scale: float = 255.0, detector=None) -> np.ndarray:
     """(ny, nx, 2) the corners cv2.aruco.CharucoDetector (its defaults) reports, by grid label; NaN = not reported
 
     image: the ChArUco frame, values 0..full_scale, given to OpenCV as 8 bits
-    (to_8bit; its ArUco detector takes 8-bit images only). detector: a
+    (detect.baselines.to_uint8, as for OpenCV's chessboard finders; its ArUco
+    detector takes 8-bit images only). detector: a
     CharucoDetector of charuco_board(layout) to reuse.
     """
+    from ..detect.baselines import to_uint8
+
     det = cv2.aruco.CharucoDetector(charuco_board(layout)) if detector is None else detector
-    corners, ids, _, _ = det.detectBoard(to_8bit(image, full_scale))
+    corners, ids, _, _ = det.detectBoard(to_uint8(image, full_scale))
     out = np.full((layout.ny, layout.nx, 2), np.nan)
     if ids is not None and len(ids):
         ij = corner_labels(ids, layout.nx)
