@@ -35,7 +35,7 @@ from .exposure import expose, full_scale_code
 from .optics import GaussianPSF, KernelPSF, TiledPSF, as_psf, gaussian_kernel
 from .poses import default_distance_range, hanging_poses, look_at_pose, pose_ok, random_poses, tilt_angle
 from .irradiance import render_irradiance
-from .screen import Screen, exact_frames, make_screen, png_frames
+from .screen import Screen, exact_frames, make_screen, png_frames, shown_light
 
 __all__ = [
     "PRESETS", "RayGrid", "camera_rays", "fov_deg", "preset_model",
@@ -44,5 +44,5 @@ __all__ = [
     "GaussianPSF", "KernelPSF", "TiledPSF", "as_psf", "gaussian_kernel",
     "default_distance_range", "hanging_poses", "look_at_pose", "pose_ok", "random_poses", "tilt_angle",
     "render_irradiance",
-    "Screen", "exact_frames", "make_screen", "png_frames",
+    "Screen", "exact_frames", "make_screen", "png_frames", "shown_light",
 ]

@@ -38,7 +38,7 @@ import cv2
 import numpy as np
 
 from ..pattern.layout import Layout
-from ..pattern.render import decode_display, render_frame
+from ..pattern.render import decode_display, encode_display, render_frame
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,6 +90,31 @@ def exact_frames(layout: Layout, frames: list[dict] | None = None) -> np.ndarray
     """render_frame of every entry of layout.frames() (or of `frames`), float32"""
     frames = layout.frames() if frames is None else frames
     return np.stack([render_frame(layout, f).astype(np.float32) for f in frames])
+
+
+def shown_light(frames: np.ndarray, gamma: float = 2.2, screen_gamma: float | None = None) -> np.ndarray:
+    """The light a screen emits for linear frames: 8-bit encoded for `gamma`, decoded with the screen's own
+
+    rotstar-pattern writes each frame as 8-bit values pre-compensated for a
+    display gamma of `gamma` (encode_display); a screen whose gamma is
+    `screen_gamma` (default: the same) emits decode_display(values,
+    screen_gamma). With equal gammas only the 8-bit quantisation remains;
+    black and white frames are unchanged either way. A mismatch bends the
+    sinusoid of a phase-shift frame (luminance^(screen_gamma / gamma)), which
+    the 4-step phase turns into a periodic phase error; binary frames do not
+    notice it.
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> f = np.array([[0.0, 0.25, 0.5, 1.0]], np.float32)
+        >>> [round(float(v), 3) for v in shown_light(f)[0]]
+        [0.0, 0.251, 0.5, 1.0]
+        >>> [round(float(v), 3) for v in shown_light(f, 2.2, 2.6)[0]]      # the screen's gamma is higher
+        [0.0, 0.195, 0.44, 1.0]
+    """
+    g = gamma if screen_gamma is None else screen_gamma
+    return decode_display(encode_display(np.asarray(frames, float), gamma), g).astype(np.float32)
 
 
 def png_frames(folder: str, layout: Layout, gamma: float = 2.2) -> np.ndarray:
