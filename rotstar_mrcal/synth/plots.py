@@ -18,7 +18,7 @@ SYNOPSIS
 - views_figure: what the refiners see: each pattern at one tilted view
   under each aberration, noise-free (the 16-segment star's centre turns grey
   under blur: its narrow wedges average out, the aliasing the paper argues
-  against).
+  against; the phase pattern's first frame is the fringes along x, step 0).
 """
 
 from __future__ import annotations
@@ -30,9 +30,9 @@ from matplotlib.figure import Figure
 
 from .experiment import Protocol, psf_kernel, render_views
 
-COLOURS = {"opencv": "tab:blue", "saddle": "tab:orange", "symmetric": "tab:green"}
-STYLES = {"checkerboard": "-", "rotstar": "--", "star16": ":"}
-MARKERS = {"checkerboard": "o", "rotstar": "s", "star16": "^"}
+COLOURS = {"opencv": "tab:blue", "saddle": "tab:orange", "symmetric": "tab:green", "phase": "tab:red"}
+STYLES = {"checkerboard": "-", "rotstar": "--", "star16": ":", "phase": "-."}
+MARKERS = {"checkerboard": "o", "rotstar": "s", "star16": "^", "phase": "D"}
 
 
 def range_figure(protocol: Protocol, rows: list[dict], noise: float) -> Figure:
