@@ -166,6 +166,7 @@ def cmd_experiment(args, given) -> int:
 
     matplotlib.use("Agg")
     from ..synth import plots, table, verdicts
+    from ..synth.refiners import applies
     from ..synth.sweep import pending_tasks, run_sweep
 
     protocol = protocol_from(args, given)
@@ -177,9 +178,10 @@ def cmd_experiment(args, given) -> int:
     t0 = time.monotonic()
     todo = pending_tasks(protocol, cache) if os.path.isdir(cache) else None
     n_conf = len(protocol.aberrations) * len(protocol.noises) * len(protocol.phis_deg)
+    pairs = sum(applies(a, r) for a in protocol.patterns for r in protocol.refiners)
     where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{args.jobs} local process(es)"
     say(f"rotstar-synth: {n_conf} configurations ({len(protocol.alphas_deg)} views x {protocol.repeats} repeats "
-        f"x {len(protocol.patterns)} patterns x {len(protocol.refiners)} refiners each); "
+        f"x {pairs} pattern-refiner pairs that apply each); "
         f"{'all' if todo is None else sum(len(t[2]) for t in todo)} to compute on {where}; cache {cache}")
     results = run_sweep(protocol, cache, jobs=args.jobs, scheduler=args.scheduler, progress=Bar())
     wall = time.monotonic() - t0

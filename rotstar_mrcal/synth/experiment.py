@@ -94,7 +94,7 @@ class Protocol:
     repeats: int = 50
     patterns: tuple = PATTERNS
     refiners: tuple = tuple(sorted(REFINERS))  # every refiner; alphabetical, the published tables' order
-    window: int = 10  # half-window of every refiner and of the bound
+    window: int = 10  # half-window of every refiner but phase (detect.phase.HALF_WINDOW) and of the bound
     supersample: int = 4
     captures: int = 8
     perturb: float = 1.0
