@@ -213,6 +213,12 @@ def test_phase_refiner_subpixel_under_a_symmetric_blur(aberration):
         assert np.linalg.norm(q - apex) < 0.01, (aberration, apex, q)
 
 
+def test_cli_refuses_a_run_where_no_refiner_applies(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["experiment", "--quick", "--patterns", "checkerboard", "--refiners", "phase", "--out", str(out)]) == 2
+    assert "no refiner of --refiners (phase) applies" in capsys.readouterr().err and not out.exists()
+
+
 def test_phase_refiner_rejects_wedges_and_table_shows_na():
     with pytest.raises(ValueError, match="8 frames"):
         refine("phase", np.zeros((1, 30, 30)), np.array([[15.0, 15.0]]))

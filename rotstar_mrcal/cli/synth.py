@@ -170,6 +170,13 @@ def cmd_experiment(args, given) -> int:
     from ..synth.sweep import pending_tasks, run_sweep
 
     protocol = protocol_from(args, given)
+    pairs = sum(applies(a, r) for a in protocol.patterns for r in protocol.refiners)
+    if not pairs:
+        fail(f"no refiner of --refiners ({', '.join(protocol.refiners)}) applies to a pattern of --patterns "
+             f"({', '.join(protocol.patterns)}): phase refines only the phase pattern, the others only the stars")
+    alone = [a for a in protocol.patterns if not any(applies(a, r) for r in protocol.refiners)]
+    if alone:
+        say(f"rotstar-synth: no refiner of --refiners applies to {', '.join(alone)}: n/a")
     out = args.out
     check_output_path(out, folder=True)
     cache = args.cache or os.path.join(out, "cache")
@@ -178,7 +185,6 @@ def cmd_experiment(args, given) -> int:
     t0 = time.monotonic()
     todo = pending_tasks(protocol, cache) if os.path.isdir(cache) else None
     n_conf = len(protocol.aberrations) * len(protocol.noises) * len(protocol.phis_deg)
-    pairs = sum(applies(a, r) for a in protocol.patterns for r in protocol.refiners)
     where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{args.jobs} local process(es)"
     say(f"rotstar-synth: {n_conf} configurations ({len(protocol.alphas_deg)} views x {protocol.repeats} repeats "
         f"x {pairs} pattern-refiner pairs that apply each); "
@@ -246,7 +252,10 @@ def summary_markdown(protocol, mean_rows, vs, wall, args, figures) -> str:
         "## Pattern x refiner: mean range over the tilts (px)",
         "",
         "Each refiner runs on the patterns it applies to: the phase refiner (detect.phase, planes in the paper's "
-        "7 x 7 px, started from the rotating star's symmetric corner as in the paper) on the phase pattern only, "
+        "7 x 7 px, started from the rotating star's symmetric corner as in the paper "
+        + ("" if "rotstar" in p.patterns and "symmetric" in p.refiners else
+           "where the run has it; this run has not, so from the common start")
+        + ") on the phase pattern only, "
         "the wedge refiners on the stars only; n/a: does not apply. fails: more than half of the detections failed.",
         "",
     ] + [f"sigma_n = {n:g} DN:\n\n" + table.grid(mean_rows, n) for n in p.noises] + [

@@ -164,6 +164,8 @@ def grid(mean_rows: list[dict], noise: float) -> str:
     "fails (N%)" where more than half of its detections failed.
     """
     rows = [r for r in mean_rows if r["noise"] == noise]
+    if not rows:
+        return "(no pattern-refiner pair that applies)\n"
     refs = list(dict.fromkeys(r["refiner"] for r in rows))
     cell = {(r["aberration"], r["pattern"], r["refiner"]): r for r in rows}
     keys = list(dict.fromkeys((r["aberration"], r["pattern"]) for r in rows))
