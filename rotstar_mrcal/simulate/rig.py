@@ -42,8 +42,9 @@ A pose's corners list only the cameras that have its folder: a camera sees
 a board when the whole band lattice is in its image with the margin
 (poses.pose_ok), as a one-camera simulation demands of every pose; a
 camera that does not see it has no folder for that pose. The board poses
-are drawn for camera 0 (poses.random_poses: every pose is camera 0's whole
-board); the other cameras see those they see.
+are drawn for each camera in turn (poses.random_poses in that camera: pose
+i is a whole board, spread over the imager, for camera i % ncam); every
+camera sees the poses it sees (rig_poses).
 
 The D435 (RIGS): camera 0 is the left infrared imager (camera.PRESETS
 'd435'), camera 1 the right one, 50 mm along camera 0's x (librealsense
@@ -172,16 +173,26 @@ def rig_cameras(name: str = "d435", seed: int = 0, rgb: bool = False, blur_px: f
 
 def rig_poses(cameras: list[RigCamera], layout: Layout, n: int, rng=None, *, distance=None,
               max_tilt_deg: float = 60.0, margin_px: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """n board poses rt_ref_board (n, 6) drawn for camera 0, and (n, ncam) bool: which camera sees each
+    """n board poses rt_ref_board (n, 6), and (n, ncam) bool: which camera sees each
 
-    margin_px: the board-to-image-edge margin (default 2% of each camera's
-    width). Camera 0 sees every pose (random_poses); camera k sees the poses
-    whose whole band lattice is inside its image with the margin (pose_ok).
+    Pose i is drawn for camera i % ncam (poses.random_poses with that
+    camera's model, spread over its imager, at its default distance range
+    unless `distance` is given), so every camera sees at least its share of
+    whole boards; every camera then sees the poses whose whole band lattice
+    is inside its image with the margin (pose_ok; margin_px defaults to 2% of
+    each camera's width).
     """
-    m0 = cameras[0].model
-    rt = random_poses(m0, layout, n, rng, distance=distance, max_tilt_deg=max_tilt_deg, margin_px=margin_px)
-    seen = np.ones((n, len(cameras)), bool)
-    for k, c in enumerate(cameras[1:], 1):
+    rng = np.random.default_rng(rng)
+    ncam = len(cameras)
+    rt = np.empty((n, 6))
+    for k, c in enumerate(cameras):
+        idx = np.arange(k, n, ncam)
+        if len(idx):
+            rt_k = random_poses(c.model, layout, len(idx), rng, distance=distance, max_tilt_deg=max_tilt_deg,
+                                margin_px=margin_px)
+            rt[idx] = mrcal.compose_rt(mrcal.invert_rt(c.model.extrinsics_rt_fromref()), rt_k)
+    seen = np.empty((n, ncam), bool)
+    for k, c in enumerate(cameras):
         rt_k = mrcal.compose_rt(c.model.extrinsics_rt_fromref(), rt)
         margin = 0.02 * float(c.model.imagersize()[0]) if margin_px is None else margin_px
         seen[:, k] = [pose_ok(c.model, layout, r, margin) for r in rt_k]
