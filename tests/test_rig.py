@@ -188,3 +188,42 @@ def test_layout_errors(tmp_path):
     shutil.copy(os.path.join(seq, "pose000", "camera-0", "rotstar_00.png"), os.path.join(seq, "pose000", "x.png"))
     with pytest.raises(dataset.DatasetError, match=r"pose000/x\.png: not a camera-K folder"):
         dataset.read_rig(seq)
+
+
+def test_turned_board_dropped_and_too_few_boards(rig_seq, detected, tmp_path, capsys):
+    """A pose whose camera-1 images are turned by 180 degrees (not how this rig sees a board) is dropped from
+    every camera; a camera left with one board gets no command (mrcal needs 2 per camera): exit 1"""
+    t = load_rig_truth(rig_seq)
+    with open(detected[0]) as f:
+        found = read_corners(f, t.layout.nx, t.layout.ny)
+    both = [p for p in t.poses
+            if all(found.get(os.path.join(rig_seq, p, f"camera-{k}", "rotstar_00.png")) is not None for k in (0, 1))][:2]
+    seq = str(tmp_path / "seq")
+    os.makedirs(seq)
+    shutil.copy(os.path.join(rig_seq, "pattern.json"), seq)
+    for p in both:
+        shutil.copytree(os.path.join(rig_seq, p), os.path.join(seq, p))
+    turned = os.path.join(seq, both[1], "camera-1")
+    for f in os.listdir(turned):
+        fn = os.path.join(turned, f)
+        cv2.imwrite(fn, cv2.imread(fn, cv2.IMREAD_UNCHANGED)[::-1, ::-1].copy())
+    vnl = str(tmp_path / "c.vnl")
+    assert detect_cli.main([seq, "-o", vnl, "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert f"{both[1]}: skipped in every camera: labelled differently in camera-0 and camera-1: the board-x direction" in err
+    assert "camera-0: 1 board(s); mrcal needs at least 2 per camera" in err  # both cameras are left with one
+    with open(vnl) as f:
+        boards = read_corners(f, t.layout.nx, t.layout.ny)
+    assert all(boards[os.path.join(seq, both[1], f"camera-{k}", "rotstar_00.png")] is None for k in (0, 1))
+    assert boards[os.path.join(seq, both[0], "camera-1", "rotstar_00.png")] is not None
+
+
+def test_simulate_rig_arguments(tmp_path, capsys):
+    from rotstar_mrcal.cli import simulate
+
+    for argv, msg in ((["--rgb"], "--rgb adds the colour camera of a --rig"),
+                      (["--rig", "d435", "--camera", "wide"], "--camera and --rig exclude each other"),
+                      (["--rig", "d435", "--display-offsets", "random:1"], "--display-offsets is not simulated")):
+        with pytest.raises(SystemExit) as e:
+            simulate.parse_args(["--out", str(tmp_path / "x"), *argv])
+        assert e.value.code == 2 and msg in capsys.readouterr().err
