@@ -227,3 +227,25 @@ def test_simulate_rig_arguments(tmp_path, capsys):
         with pytest.raises(SystemExit) as e:
             simulate.parse_args(["--out", str(tmp_path / "x"), *argv])
         assert e.value.code == 2 and msg in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_three_cameras_of_different_sizes(tmp_path, monkeypatch, capsys):
+    """--rgb: the colour camera's 640x360 beside 640x400 (no --imagersize: mrcal reads each camera's size from
+    its images, so the command runs where rotstar-detect ran); every camera recovered against the truth"""
+    from rotstar_mrcal.cli import simulate
+
+    monkeypatch.chdir(tmp_path)
+    assert simulate.main(["--rig", "d435-small", "--rgb", "--poses", "15", "--supersample", "2", "--seed", "1",
+                          "--out", "seq"]) == 0
+    assert calibrate_cli.main(["seq", "--outdir", "cal"]) == 0
+    err = capsys.readouterr().err
+    assert "--imagersize" not in err.split("$ mrcal-calibrate-cameras")[-1]
+    t = load_rig_truth("seq")
+    for k in (0, 1, 2):
+        m = mrcal.cameramodel(os.path.join("cal", f"camera-{k}.cameramodel"))
+        assert tuple(m.imagersize()) == tuple(t.models[k].imagersize())
+        assert np.allclose(m.intrinsics()[1][:4], t.models[k].intrinsics()[1][:4], atol=0.5)
+        c = -mrcal.R_from_r(m.extrinsics_rt_fromref()[:3]).T @ m.extrinsics_rt_fromref()[3:]
+        c_true = -mrcal.R_from_r(t.models[k].extrinsics_rt_fromref()[:3]).T @ t.models[k].extrinsics_rt_fromref()[3:]
+        assert np.linalg.norm(c - c_true) < 1e-3
