@@ -111,3 +111,12 @@ def test_capture_pose_with_the_paper_sequence(tmp_path):
     sat = scene.EXPOSURES[-1][0]
     assert "saturated" in " ".join(r.rejected[sat]["phase"].ravel())
     assert not any(r.rejected[sat]["phase-keep"].ravel())
+
+
+def test_docs_have_the_demos_paper_blocks():
+    """scripts/demo.py writes the paper's claims into README.md and the whole section into doc/validation.md"""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for path, name in (("README.md", "demo:claims"), ("doc/validation.md", "demo:paper")):
+        with open(os.path.join(root, path)) as f:
+            text = f.read()
+        assert text.count(f"<!-- {name}:begin -->") == 1 and text.count(f"<!-- {name}:end -->") == 1, (path, name)

@@ -14,7 +14,9 @@ Seidel coma growing linearly with the field radius (COMA_WAVES at the image
 corners, its centroid put back on the chief ray by an equal and opposite
 tilt, so the true model is where the light's centroid lands), plus field
 curvature (FOCUS_WAVES x h^2) and diffraction at F/2 with 3 um pixels. The
-screen: the default layout (iPad 2360x1640, 14 x 9 corners).
+screen: the default layout (iPad 2360x1640, 14 x 9 corners) with the paper's
+whole sequence, its 8-bit frames encoded for a display gamma of
+PATTERN_GAMMA and shown with the screen's SCREEN_GAMMA.
 
 The experiment (paper 4.2): two groups of poses, each the iPad turned about
 a fixed axis in 30-degree steps from 0 to 60 degrees (the paper: 10-degree

@@ -144,8 +144,7 @@ def build_report(results, dirs, out: str, title: str, notes: str = "", extra_fig
     head_md = head.markdown() + "\n\n" + "\n".join(f"- {v}" for v in verdicts(results)) + "\n"
     paper = paper_section(results)  # the table by tilt (simulated) and the paper's claims (its patterns)
     if paper_run(results):  # the claims in short under the headline too
-        head_md += "\nThe paper's claims (4.2):\n\n" + "\n".join(
-            f"- {v}" for v in short_lines(claims(results))) + "\n"
+        head_md += "\nThe paper's claims (4.2):\n\n" + "\n".join(short_lines(claims(results))) + "\n"
     files = {"index.md": md, "index.html": page, "headline.md": head_md,
              "results.json": json.dumps({"format": "rotstar-report/1", "conditions": results}, indent=1) + "\n"}
     if paper:
