@@ -153,6 +153,8 @@ def camera_alignment(model, true_model, rt_ref_board: dict) -> np.ndarray | None
     from ..detect.baselines import relabelled_boards
 
     oi = model.optimization_inputs()
+    if oi is None:
+        return None
     ny, nx = oi["observations_board"].shape[1:3]
     spacing = oi["calibration_object_spacing"]
     board = mrcal.ref_calibration_object(nx, ny, spacing, calobject_warp=oi.get("calobject_warp"))
@@ -179,7 +181,8 @@ def camera_truth_error(model, true_model, rt_ref_board: dict, gridn_width: int =
     """One camera of a joint calibration against the true camera: projection error over its imager, at infinity
 
     Falls back to truth.truth_error's mrcal.projection_diff when fewer than
-    two frames have a known true pose.
+    two frames have a known true pose (or the model has no
+    optimization_inputs).
     """
     from .truth import truth_error
 
@@ -229,3 +232,62 @@ def pair_crossval(pair_a, pair_b, distances, gridn_width: int = 40) -> dict:
             cams.append({"error": f"{type(e).__name__}: {e}"})
     return {"cameras": cams, "extrinsics": extrinsics_error(pair_a, pair_b).summary(),
             "pair_diff": pair_diff(pair_a, pair_b, distances, gridn_width)}
+
+
+def pair_stats(models) -> list[dict]:
+    """Per camera of a joint calibration: boards it saw, points used, RMS and worst residual (px, 2-D, unweighted)"""
+    oi = models[0].optimization_inputs()
+    obs = oi["observations_board"]
+    ny, nx = obs.shape[1:3]
+    idx = oi["indices_frame_camintrinsics_camextrinsics"]
+    board = mrcal.ref_calibration_object(nx, ny, oi["calibration_object_spacing"],
+                                         calobject_warp=oi.get("calobject_warp"))
+    out = []
+    for m in models:
+        ic = m.icam_intrinsics()
+        sel = idx[:, 1] == ic
+        rt = mrcal.compose_rt(m.rt_cam_ref(), oi["rt_ref_frame"][idx[sel, 0]])
+        q = mrcal.project(mrcal.transform_point_rt(rt[:, None, None, :], board), *m.intrinsics())
+        e = np.linalg.norm(q - obs[sel, ..., :2], axis=-1)[obs[sel, ..., 2] > 0]
+        out.append({"boards": int(sel.sum()), "points": int(e.size),
+                    "rms_px": float(np.sqrt(np.mean(e**2))) if e.size else None,
+                    "max_px": float(np.max(e)) if e.size else None})
+    return out
+
+
+def evaluate(method: str, pairs: dict, truth=None, rt_ref_board: dict | None = None, heldout: dict | None = None,
+             noise_px: float = 0.0, seed: int = 0, gridn_width: int = 40) -> dict:
+    """Every number of the stereo calibrations of one corner set (JSON-able)
+
+    pairs: {"A": (model 0, model 1), "B": ...} (joint calibrations of two
+    pose groups, with their optimization_inputs); truth: the true pair or
+    None; rt_ref_board: {pose: true rt_ref_board} (camera_truth_error's
+    alignment); heldout: depth.heldout_points of the true pair (the depth
+    table). noise_px: the corner noise of the method, added to the held-out
+    pixels in a second depth table ("depth_noisy").
+
+        {"method", "calibration": {g: [per camera stats]},
+         "truth": {g: {"cameras": [camera_truth_error summaries], "extrinsics": ...,
+                       "depth": ..., "depth_noisy": ...}},
+         "crossval": {"cameras", "extrinsics", "pair_diff", "depth"}}
+    """
+    from . import depth as dp
+
+    out = {"method": method, "calibration": {g: pair_stats(p) for g, p in pairs.items()}}
+    if truth is not None:
+        out["truth"] = {}
+        for g, p in pairs.items():
+            t = {"cameras": [camera_truth_error(m, tm, rt_ref_board or {}, gridn_width).summary()
+                             for m, tm in zip(p, truth)],
+                 "extrinsics": extrinsics_error(p, truth).summary()}
+            if heldout:
+                t["depth"] = dp.depth_error(heldout, truth, p).summary()
+                if noise_px:
+                    t["depth_noisy"] = dp.depth_error(heldout, truth, p, noise_px, rng=seed).summary()
+            out["truth"][g] = t
+    if "A" in pairs and "B" in pairs:
+        distances = sorted(heldout) if heldout else list(dp.DISTANCES)
+        cv = pair_crossval(pairs["A"], pairs["B"], distances, gridn_width)
+        cv["depth"] = dp.depth_crossval(pairs["A"], pairs["B"], distances)
+        out["crossval"] = cv
+    return out
