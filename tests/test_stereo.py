@@ -222,3 +222,37 @@ def test_evaluate_summary(solved):
     assert set(t["depth"]["depths"]) == {"0.5", "1", "2"}
     assert t["depth_noisy"]["noise_px"] == 0.02
     assert set(s["crossval"]) == {"cameras", "extrinsics", "pair_diff", "depth"}
+
+
+@pytest.fixture(scope="module")
+def stereo_result(solved):
+    true, a, b, rt = solved
+    pts = depth.heldout_points(true, SPACING, across=2)
+    m = stereo.evaluate("rotstar", {"A": a, "B": b}, true, rt, pts, noise_px=0.02, gridn_width=10)
+    m["corner_rms_px"] = 0.02
+    return {"format": "rotstar-stereo/1", "label": "synthetic pair", "distances": sorted(pts),
+            "setup": "Two OPENCV8 cameras 50 mm apart.", "methods": [m]}
+
+
+def test_stereo_report_section(stereo_result, tmp_path, capsys):
+    import json
+    import os
+
+    from rotstar_mrcal.cli.report import main
+    from rotstar_mrcal.validate import stereoreport
+
+    d = tmp_path / "stereo"
+    os.makedirs(d)
+    json.dump(stereo_result, open(d / "results.json", "w"))
+    assert main([str(d), "--out", str(tmp_path / "r"), "--no-mrcal-figures"]) == 0
+    md = open(tmp_path / "r" / "index.md").read()
+    assert "## Stereo: synthetic pair" in md and "### Depth error" in md and "### Cross-validation (A against B)" in md
+    row = next(r for r in stereoreport.headline(stereo_result).rows if r[0] == "rotstar")
+    assert "| " + " | ".join(row) + " |" in md  # the numbers of the result, in the page
+    assert "depth RMS at 2 m, mm" in capsys.readouterr().out  # the headline on stdout
+    assert "<h2>Stereo: synthetic pair</h2>" in open(tmp_path / "r" / "index.html").read()
+    assert json.load(open(tmp_path / "r" / "results.json"))["stereo"][0]["label"] == "synthetic pair"
+    # a stereo results file without its methods is bad input, named
+    json.dump({"format": "rotstar-stereo/1"}, open(d / "results.json", "w"))
+    assert main([str(d), "--out", str(tmp_path / "r2")]) == 2
+    assert "results.json: a rotstar-stereo results file without its methods" in capsys.readouterr().err
