@@ -142,8 +142,8 @@ def small_rotation(rng: np.random.Generator, lo_deg: float, hi_deg: float) -> np
 def rig_cameras(name: str = "d435", seed: int = 0, rgb: bool = False, blur_px: float = 1.0) -> list[RigCamera]:
     """The cameras of rig `name` (RIGS); the right imager's lens and the rotations are drawn from seed
 
-    blur_px: the left imager's PSF sigma; the right one's is 10% larger, the
-    colour camera's 20% (lenses of their own).
+    blur_px: the left imager's PSF sigma; the right one's is 10% smaller, the
+    colour camera's 10% larger (lenses of their own).
     """
     try:
         scale = RIGS[name]["scale"]
@@ -155,19 +155,19 @@ def rig_cameras(name: str = "d435", seed: int = 0, rgb: bool = False, blur_px: f
     W, H = (int(round(v * scale)) for v in left.imagersize())
     intr0 = scaled_intrinsics(intr, scale)
     intr1 = intr0.copy()
-    intr1[:2] *= 1 + rng.normal(0, 0.004, 2)  # fx, fy within a few pixels of the left one's
+    intr1[:2] *= 1 + rng.normal(0, 0.004)  # fx = fy (square pixels) within a few pixels of the left one's
     intr1[2:4] += rng.normal(0, 3.0 * scale, 2)  # the centre within a few pixels
-    intr1[4:9] += rng.normal(0, 0.004, 5) * np.abs(intr0[4:9] / np.maximum(np.abs(intr0[4:9]), 1e-3))  # k1 k2 p1 p2 k3
+    intr1[4:9] += rng.normal(0, 1, 5) * (0.003, 0.003, 2e-4, 2e-4, 0.003)  # k1 k2 p1 p2 k3
     cams = [
         RigCamera("left IR", camera_model(lens, intr0, (W, H), np.zeros(3), np.zeros(3)), blur_px),
         RigCamera("right IR", camera_model(lens, intr1, (W, H), small_rotation(rng, 0.1, 0.3),
-                                           (BASELINE_M, 0.0, 0.0)), 1.1 * blur_px),
+                                           (BASELINE_M, 0.0, 0.0)), 0.9 * blur_px),
     ]
     if rgb:
         intr2 = scaled_intrinsics(COLOUR_INTRINSICS, scale)
         cw, ch = int(round(1280 * scale)), int(round(720 * scale))
         cams.append(RigCamera("colour", camera_model(lens, intr2, (cw, ch), small_rotation(rng, 0.2, 0.4),
-                                                     (COLOUR_OFFSET_M, 0.0, 0.0)), 1.2 * blur_px, bits=8))
+                                                     (COLOUR_OFFSET_M, 0.0, 0.0)), 1.1 * blur_px, bits=8))
     return cams
 
 
