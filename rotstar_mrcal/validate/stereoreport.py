@@ -85,6 +85,47 @@ def headline(result) -> Table:
     return Table(header, rows, cap, _bold_best(vals, len(header) - 1))
 
 
+def _worst(vals):
+    v = [abs(x) for x in vals if x is not None and np.isfinite(x)]
+    return max(v) if v else None
+
+
+def verdicts(result) -> list[str]:
+    """A few sentences: each method's worst baseline and rotation error, its depth error at the farthest distance
+
+    SYNOPSIS
+
+        >>> r = {"distances": [2.0], "methods": [{"method": "rotstar", "truth": {
+        ...     "A": {"extrinsics": {"baseline_error_mm": 0.01, "baseline_true_mm": 50.0, "rotation_error_deg": 0.002},
+        ...           "depth": {"depths": {"2": {"rms_mm": 1.0, "rms_pct": 0.05}}}},
+        ...     "B": {"extrinsics": {"baseline_error_mm": -0.02, "baseline_true_mm": 50.0, "rotation_error_deg": 0.001},
+        ...           "depth": {"depths": {"2": {"rms_mm": 3.0, "rms_pct": 0.15}}}}}}]}
+        >>> for v in verdicts(r): print(v)
+        rotstar: baseline within 0.02 mm of the true 50 mm, rotation within 0.002 deg (both calibrations).
+        Depth RMS error at 2 m, from the calibration alone (worse of A and B): rotstar 3 mm (0.15 %).
+    """
+    out, depth = [], []
+    far = f"{max(result.get('distances') or [0]):g}"
+    for m in result["methods"]:
+        t = m.get("truth") or {}
+        gs = sorted(t)
+        db = _worst([_get(t, g, "extrinsics", "baseline_error_mm") for g in gs])
+        dr = _worst([_get(t, g, "extrinsics", "rotation_error_deg") for g in gs])
+        b = next((_get(t, g, "extrinsics", "baseline_true_mm") for g in gs), None)
+        if db is not None and dr is not None:
+            out.append(f"{m['method']}: baseline within {fmt(db, 2)} mm of the true {fmt(b, 3)} mm, rotation within "
+                       f"{fmt(dr, 2)} deg (both calibrations).")
+        rms = [_get(t, g, "depth", "depths", far, "rms_mm") for g in gs]
+        if _worst(rms) is not None:
+            g = gs[int(np.nanargmax([abs(x) if x is not None else np.nan for x in rms]))]
+            depth.append(f"{m['method']} {fmt(_worst(rms), 2)} mm "
+                         f"({fmt(_get(t, g, 'depth', 'depths', far, 'rms_pct'), 2)} %)")
+    if depth:
+        out.append(f"Depth RMS error at {far} m, from the calibration alone (worse of A and B): "
+                   + ", ".join(depth) + ".")
+    return out
+
+
 def depth_table(result, key: str = "depth") -> Table:
     """Per method and group: the depth error at each distance, mean / RMS / 95th percentile (mm) and RMS (%)"""
     d = [f"{z:g}" for z in result.get("distances", [])]
@@ -176,6 +217,7 @@ def section(result, level: int = 2) -> str:
     out = [f"{h} Stereo: {result.get('label', 'pair')}", ""]
     if result.get("setup"):
         out += [result["setup"].strip(), ""]
+    out += [f"- {v}" for v in verdicts(result)] + [""]
     for title, t in tables(result):
         out += [f"{h}# {title}", "", t.markdown(), "", f"*{t.caption}*", ""]
     return "\n".join(out)
@@ -187,6 +229,7 @@ def section_html(result) -> str:
     out = [f"<h2>Stereo: {e(result.get('label', 'pair'))}</h2>"]
     if result.get("setup"):
         out += [f"<p>{e(p)}</p>" for p in result["setup"].strip().split("\n\n")]
+    out += ["<ul>"] + [f"<li>{e(v)}</li>" for v in verdicts(result)] + ["</ul>"]
     for title, t in tables(result):
         out += [f"<h3>{e(title)}</h3>", t.html()]
     return "\n".join(out)
