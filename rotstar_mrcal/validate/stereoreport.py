@@ -66,20 +66,21 @@ def _camera(truth: dict, group: str, k: int):
 def headline(result) -> Table:
     """Methods: each camera against the truth, baseline and rotation error, depth RMS at each distance (A / B)"""
     d = [f"{z:g}" for z in result.get("distances", [])]
-    header = ["method", "camera 0 vs truth, px", "camera 1 vs truth, px", "baseline error, mm",
-              "rotation error, deg"] + [f"depth RMS at {z} m, mm" for z in d]
+    ncam = max([2] + [len(_get(m, "truth", g, "cameras") or []) for m in result["methods"] for g in _groups(m)])
+    header = (["method"] + [f"camera {k} vs truth, px" for k in range(ncam)]
+              + ["baseline error, mm", "rotation error, deg"] + [f"depth RMS at {z} m, mm" for z in d])
     rows, vals = [], []
     for m in result["methods"]:
         gs = _groups(m)
         t = m.get("truth") or {}
-        v = [[_camera(t, g, 0) for g in gs], [_camera(t, g, 1) for g in gs],
-             [_get(t, g, "extrinsics", "baseline_error_mm") for g in gs],
-             [_get(t, g, "extrinsics", "rotation_error_deg") for g in gs]]
+        v = [[_camera(t, g, k) for g in gs] for k in range(ncam)]
+        v += [[_get(t, g, "extrinsics", "baseline_error_mm") for g in gs],
+              [_get(t, g, "extrinsics", "rotation_error_deg") for g in gs]]
         v += [[_get(t, g, "depth", "depths", z, "rms_mm") for g in gs] for z in d]
         vals.append(v)
-        rows.append([m["method"]] + [_cell(c, 2 if j >= 4 else 3) for j, c in enumerate(v)])
+        rows.append([m["method"]] + [_cell(c, 2 if j >= ncam + 2 else 3) for j, c in enumerate(v)])
     cap = ("Each calibration (pose group A / B) against the true rig: each camera's median projection error over "
-           "its imager; camera 1's position (baseline length) and rotation relative to camera 0; the RMS depth "
+           "its imager (camera 2: the colour camera, calibrated with the pair, when there is one); camera 1's position (baseline length) and rotation relative to camera 0; the RMS depth "
            "error of held-out board corners seen by the true cameras and triangulated through the calibrated, "
            "rectified pair. Bold: best in its column.")
     return Table(header, rows, cap, _bold_best(vals, len(header) - 1))
