@@ -87,10 +87,11 @@ def parse_args(argv=None):
     p.add_argument("--out", default="stereo-out", help="output folder (default stereo-out)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel processes")
     p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"rig, poses and noise seed (default {DEFAULT_SEED})")
-    p.add_argument("--poses", type=int, default=DEFAULT_POSES,
-                   help=f"board poses in all, split into the groups A and B (default {DEFAULT_POSES})")
+    p.add_argument("--poses", type=int, default=None,
+                   help=f"board poses in all, split into the groups A and B (default {DEFAULT_POSES}; with --rgb "
+                   f"{DEFAULT_POSES * 3 // 2}, as the colour camera's narrower field sees fewer whole boards)")
     p.add_argument("--rgb", action="store_true", help="add the D435's colour camera (camera 2) to the rig")
-    p.add_argument("--quick", action="store_true", help="12 poses (a smoke run)")
+    p.add_argument("--quick", action="store_true", help="half the poses, 30 with --rgb (a smoke run)")
     p.add_argument("--no-docs", action="store_true", help="do not rewrite README.md and doc/validation.md")
     return p.parse_args(argv)
 
@@ -217,8 +218,11 @@ def write_docs(result: dict) -> None:
 
 def main(argv=None) -> int:
     a = parse_args(argv)
-    if a.quick:
-        a.poses = 12
+    full = a.poses is None
+    if a.poses is None:
+        a.poses = DEFAULT_POSES * 3 // 2 if a.rgb else DEFAULT_POSES
+        if a.quick:  # the colour camera needs its >= 4 boards in each group: 5 of 30
+            a.poses = 30 if a.rgb else a.poses // 2
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     t0 = time.monotonic()
     out = os.path.abspath(a.out)
@@ -242,7 +246,7 @@ def main(argv=None) -> int:
           "(also index.md)")
     print()
     print(stereoreport.section(result))
-    if not (a.no_docs or a.quick or a.rgb or a.seed != DEFAULT_SEED or a.poses != DEFAULT_POSES):
+    if not (a.no_docs or a.quick or a.rgb or a.seed != DEFAULT_SEED or not full):
         write_docs(result)
     return 0
 
