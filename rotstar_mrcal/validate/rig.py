@@ -54,7 +54,7 @@ from .. import dataset
 from ..atomic import atomic_path
 from ..focal import focal_estimates
 from ..vnl import mrcal_keeps, read_corners
-from .calibrate import (LEAN_LENSMODEL, MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, VALID_REGION_PARAMETERS,
+from .calibrate import (MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, VALID_REGION_PARAMETERS,
                         CalibrationError, InputError, command_line, resolve_lensmodel, run_calibration, vnl_has_weights)
 
 
