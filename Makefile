@@ -16,6 +16,7 @@ GNUPLOT_BIN := $(CURDIR)/.tools/gnuplot
 RUN := PATH="$(GNUPLOT_BIN):$(VENV_BIN):$$PATH"
 PYTEST_ARGS ?=
 DEMO_DIR ?= demo-out
+STEREO_DIR ?= stereo-out
 BENCH_ARGS ?=
 
 # The first candidate that really runs and is >= 3.12 (pyenv shims can exist and fail).
@@ -28,11 +29,12 @@ ifeq ($(UV),)
 UV := $(CURDIR)/.tools/bin/uv
 endif
 
-.PHONY: help setup test demo bench calib-bench coverage-bench pip-check clean check-python system-deps
+.PHONY: help setup test demo stereo bench calib-bench coverage-bench pip-check clean check-python system-deps
 
 help:
 	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
 	@echo "make test   - run the test suite (all set-up included)"
+	@echo "make stereo - simulated D435 stereo pair: joint calibrations vs the truth, cross-validation, depth error at 0.5/1/2 m"
 	@echo "make bench  - accuracy and speed against OpenCV and mrgingham, partial views against ChArUco, then calib-bench and coverage-bench"
 	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses)"
 	@echo "make coverage-bench - mrcal's uncertainty with and without boards hanging over the imager's edges"
@@ -73,6 +75,10 @@ test: setup
 demo: setup
 	$(RUN) $(VENV_BIN)/python scripts/demo.py --out $(DEMO_DIR)
 
+# writes its tables into doc/validation.md (stereo:tables) and README.md (stereo:headline)
+stereo: setup
+	$(RUN) $(VENV_BIN)/python scripts/stereo.py --out $(STEREO_DIR)
+
 bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/bench.py $(BENCH_ARGS)
 	$(MAKE) calib-bench
@@ -90,4 +96,4 @@ pip-check: check-python
 	PYTHON=$(PYTHON) $(VENV_BIN)/python -m pytest -q -s -m slow tests/test_pip_install.py
 
 clean:
-	rm -rf .venv .tools $(DEMO_DIR) .pytest_cache calib-bench-out coverage-bench-out
+	rm -rf .venv .tools $(DEMO_DIR) $(STEREO_DIR) .pytest_cache calib-bench-out coverage-bench-out

@@ -17,6 +17,12 @@ the order given). Writes OUT/index.md and OUT/index.html (the same page),
 OUT/headline.md, OUT/results.json (all conditions) and the figures: the
 summary bar charts, and each condition's per-pose plot and maps, copied.
 
+A folder (or results.json) written by `make stereo` (scripts/stereo.py,
+format rotstar-stereo/1) adds a stereo section: each calibration of a
+camera pair against the true rig (per-camera error, baseline and rotation
+error), the depth error at 0.5, 1 and 2 m, and the cross-validation of the
+two pose groups' calibrations; it may be the only input.
+
 Per condition it also draws mrcal's own views of the first method's
 calibration on group A (mrcal-show-projection-uncertainty, -residuals,
 -residuals-board-observation, -distortion-off-pinhole,
@@ -42,7 +48,8 @@ duplicate labels, an --out that cannot be a folder).
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-report", description=DESCRIPTION,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("xval", nargs="+", help="rotstar-crossval --outdir folders (or their results.json)")
+    p.add_argument("xval", nargs="+", help="rotstar-crossval --outdir folders (or their results.json); "
+                   "make stereo's stereo folder")
     p.add_argument("--out", default="report", help="report folder (default report)")
     p.add_argument("--title", default="rotstar-mrcal validation report")
     p.add_argument("--notes", help="a Markdown file whose text goes under the title (the set-up)")

@@ -33,6 +33,12 @@ Modules, one concept each:
     compare      all of the above for several corner sets of the same poses
     plots        the figures (matplotlib)
     report       the Markdown and HTML report, and its headline table
+    stereo       a camera pair: each camera and the extrinsics against the
+                 truth, two calibrations of the pair cross-validated
+    depth        a calibrated pair in depth terms: held-out board corners
+                 rectified (mrcal.rectified_system), triangulated, against
+                 the true depth; mrcal's depth uncertainty
+    stereoreport the report's stereo section (make stereo)
 
 Everything here is a function of arrays, models and file names; the
 command-line tools (rotstar-calibrate, rotstar-crossval, rotstar-report) do

@@ -268,16 +268,20 @@ def _alt(caption: str) -> str:
     return caption.split(". Redraw:")[0].replace("[", "(").replace("]", ")")
 
 
-def markdown(results, title: str, figures=(), per_condition_figures=None, notes: str = "") -> str:
+def markdown(results, title: str, figures=(), per_condition_figures=None, notes: str = "", stereo=()) -> str:
     """The report page. figures: [(caption, path)] after the headline; per_condition_figures:
-    {label: [(caption, path)]} after each condition's table."""
+    {label: [(caption, path)]} after each condition's table; stereo: make stereo's results
+    (stereoreport), a section each after the conditions."""
+    from .stereoreport import section
+
     out = [f"# {title}", ""]
     if notes:
         out += [notes.strip(), ""]
-    h = headline(results)
-    out += ["## Headline", "", h.markdown(), "", f"*{h.caption}*", ""]
-    out += [f"- {v}" for v in verdicts(results)] + [""]
-    out += [paper_section(results)] if paper_section(results) else []
+    if results:
+        h = headline(results)
+        out += ["## Headline", "", h.markdown(), "", f"*{h.caption}*", ""]
+        out += [f"- {v}" for v in verdicts(results)] + [""]
+        out += [paper_section(results)] if paper_section(results) else []
     for cap, path in figures:
         out += [f"![{cap}]({path})", "", f"*{cap}*", ""]
     for r in results:
@@ -293,12 +297,15 @@ def markdown(results, title: str, figures=(), per_condition_figures=None, notes:
         if r.get("commands"):
             out += ["<details><summary>commands run</summary>", "", "```"] + r["commands"] + ["```", "",
                                                                                               "</details>", ""]
+    out += [section(s) for s in stereo]
     out += ["See doc/validation.md for what the numbers mean and what to do when they are not good.", ""]
     return "\n".join(out)
 
 
-def html(results, title: str, figures=(), per_condition_figures=None, notes: str = "") -> str:
+def html(results, title: str, figures=(), per_condition_figures=None, notes: str = "", stereo=()) -> str:
     """The same page as markdown(), as standalone HTML"""
+    from .stereoreport import section_html
+
     e = _html.escape
     out = ["<!DOCTYPE html>", "<html><head><meta charset='utf-8'>", f"<title>{e(title)}</title>",
            "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
@@ -309,19 +316,20 @@ def html(results, title: str, figures=(), per_condition_figures=None, notes: str
            "</head><body>", f"<h1>{e(title)}</h1>"]
     if notes:
         out += [f"<p>{e(p)}</p>" for p in notes.strip().split("\n\n")]
-    out += ["<h2>Headline</h2>", headline(results).html(), "<ul>"]
-    out += [f"<li>{e(v)}</li>" for v in verdicts(results)] + ["</ul>"]
-    t = tilt_table(results)
-    if t is not None:
-        out += ["<h2>By tilt of the test poses</h2>", t.html()]
-    if paper_run(results):
-        from .claims import claims
+    if results:
+        out += ["<h2>Headline</h2>", headline(results).html(), "<ul>"]
+        out += [f"<li>{e(v)}</li>" for v in verdicts(results)] + ["</ul>"]
+        t = tilt_table(results)
+        if t is not None:
+            out += ["<h2>By tilt of the test poses</h2>", t.html()]
+        if paper_run(results):
+            from .claims import claims
 
-        out += ["<h2>The paper's real-world claims (4.2)</h2>", "<ol>"]
-        for v in claims(results):
-            out += [f"<li><b>{e(v.status)}</b> ({e(v.score)}). <i>{e(v.claim)}</i><ul>"]
-            out += [f"<li>{'yes' if c.passed else 'no'}: {e(c.text)}</li>" for c in v.checks] + ["</ul></li>"]
-        out += ["</ol>"]
+            out += ["<h2>The paper's real-world claims (4.2)</h2>", "<ol>"]
+            for v in claims(results):
+                out += [f"<li><b>{e(v.status)}</b> ({e(v.score)}). <i>{e(v.claim)}</i><ul>"]
+                out += [f"<li>{'yes' if c.passed else 'no'}: {e(c.text)}</li>" for c in v.checks] + ["</ul></li>"]
+            out += ["</ol>"]
     for cap, path in figures:
         out.append(f"<figure><img src='{e(path)}' alt='{e(cap)}'><figcaption>{e(cap)}</figcaption></figure>")
     for r in results:
@@ -334,5 +342,6 @@ def html(results, title: str, figures=(), per_condition_figures=None, notes: str
         if r.get("commands"):
             out.append("<details><summary>commands run</summary><pre>" + e("\n".join(r["commands"]))
                        + "</pre></details>")
+    out += [section_html(s) for s in stereo]
     out += ["<p>See doc/validation.md for what the numbers mean.</p>", "</body></html>"]
     return "\n".join(out)

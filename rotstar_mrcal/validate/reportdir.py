@@ -31,7 +31,7 @@ import re
 import shutil
 
 from ..atomic import atomic_write
-from . import plots
+from . import plots, stereoreport
 from .groups import Comparison
 from .claims import claims, short_lines
 from .report import headline, html, markdown, methods_of, paper_run, paper_section, verdicts
@@ -58,8 +58,11 @@ def load_results(path: str) -> tuple[dict, str]:
             r = json.load(f)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise ValueError(f"{fn}: not a rotstar-crossval results file ({e})") from None
+    if isinstance(r, dict) and r.get("format") == stereoreport.FORMAT:  # make stereo's: the stereo section
+        stereoreport.check(r, fn)
+        return r, os.path.dirname(os.path.abspath(fn))
     if not isinstance(r, dict) or r.get("format") != "rotstar-crossval/1":
-        raise ValueError(f"{fn}: not a rotstar-crossval results file")
+        raise ValueError(f"{fn}: not a rotstar-crossval results file (nor a rotstar-stereo one)")
     try:
         Comparison.from_json(r)
     except ValueError as e:
@@ -78,9 +81,16 @@ def _copy(src_dir: str, rel: str, out: str, dst_rel: str) -> str | None:
 
 def build_report(results, dirs, out: str, title: str, notes: str = "", extra_figures=(), mrcal_figures: bool = True,
           log=None) -> dict:
-    """Write the report folder; returns {'index.md': path, ...}"""
+    """Write the report folder; returns {'index.md': path, ...}
+
+    Results of format rotstar-stereo/1 (make stereo) are shown as stereo
+    sections after the conditions.
+    """
     import matplotlib.pyplot as plt
 
+    stereo = [r for r in results if r.get("format") == stereoreport.FORMAT]
+    dirs = [d for r, d in zip(results, dirs) if r.get("format") != stereoreport.FORMAT]
+    results = [r for r in results if r.get("format") != stereoreport.FORMAT]
     os.makedirs(out, exist_ok=True)
     labels = [r["label"] for r in results]
     if len(set(labels)) != len(labels):
@@ -110,9 +120,10 @@ def build_report(results, dirs, out: str, title: str, notes: str = "", extra_fig
         plt.close(fig)
         figures.insert(at, (caption, fn))
 
-    bars("heldout", [("calibrated on A, tested on B", "A->B"), ("calibrated on B, tested on A", "B->A")],
-         "held-out mean reprojection error, px", "summary-heldout.png",
-         "Held-out mean reprojection error (the paper's metric) by method and condition", 0)
+    if results:
+        bars("heldout", [("calibrated on A, tested on B", "A->B"), ("calibrated on B, tested on A", "B->A")],
+             "held-out mean reprojection error, px", "summary-heldout.png",
+             "Held-out mean reprojection error (the paper's metric) by method and condition", 0)
     if any(m.get("truth") for r in results for m in r["methods"]):
         bars("truth", [("calibrated on A", "A"), ("calibrated on B", "B")],
              "vs true model: median error over the imager, px", "summary-truth.png",
@@ -138,15 +149,22 @@ def build_report(results, dirs, out: str, title: str, notes: str = "", extra_fig
             figs += _mrcal_views(r, d, out, s, log)
         per_condition[r["label"]] = figs
 
-    md = markdown(results, title, figures, per_condition, notes)
-    page = html(results, title, figures, per_condition, notes)
-    head = headline(results)
-    head_md = head.markdown() + "\n\n" + "\n".join(f"- {v}" for v in verdicts(results)) + "\n"
-    paper = paper_section(results)  # the table by tilt (simulated) and the paper's claims (its patterns)
-    if paper_run(results):  # the claims in short under the headline too
-        head_md += "\nThe paper's claims (4.2):\n\n" + "\n".join(short_lines(claims(results))) + "\n"
+    md = markdown(results, title, figures, per_condition, notes, stereo)
+    page = html(results, title, figures, per_condition, notes, stereo)
+    head_md = ""
+    paper = ""
+    if results:
+        head_md = headline(results).markdown() + "\n\n" + "\n".join(f"- {v}" for v in verdicts(results)) + "\n"
+        paper = paper_section(results)  # the table by tilt (simulated) and the paper's claims (its patterns)
+        if paper_run(results):  # the claims in short under the headline too
+            head_md += "\nThe paper's claims (4.2):\n\n" + "\n".join(short_lines(claims(results))) + "\n"
+    for r in stereo:
+        head_md += ("\n" if head_md else "") + stereoreport.headline(r).markdown() + "\n"
+    summary = {"format": "rotstar-report/1", "conditions": results}
+    if stereo:
+        summary["stereo"] = stereo
     files = {"index.md": md, "index.html": page, "headline.md": head_md,
-             "results.json": json.dumps({"format": "rotstar-report/1", "conditions": results}, indent=1) + "\n"}
+             "results.json": json.dumps(summary, indent=1) + "\n"}
     if paper:
         files["paper.md"] = paper
     for name, text in files.items():  # each file whole or not at all
