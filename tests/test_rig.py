@@ -13,6 +13,8 @@ import shutil
 
 import cv2
 import mrcal
+
+from rotstar_mrcal.validate.calibrate import board_residuals
 import numpy as np
 import pytest
 
@@ -128,6 +130,9 @@ def test_calibrate_recovers_the_baseline(rig_seq, detected, tmp_path, capsys):
         rt, rt_true = m.extrinsics_rt_fromref(), t.models[k].extrinsics_rt_fromref()
         assert np.linalg.norm(rt[3:] - rt_true[3:]) < 1e-3  # metres
         assert np.degrees(np.linalg.norm(rt[:3] - rt_true[:3])) < 0.05
+    # the plain residuals put every board through its own camera (camera 1's through camera 0's lens: ~2 px)
+    e = board_residuals(m)
+    assert np.isfinite(e).sum() > 500 and np.sqrt(np.nanmean(e**2)) < 0.05
 
 
 # ---------------------------------------------------------------------------

@@ -323,7 +323,8 @@ def board_residuals(model: mrcal.cameramodel):
 
     Returns (N, ny, nx) pixel distances between the observed corners and the
     solved model's projection of the (warped) board, NaN where a corner was
-    missing or rejected as an outlier. mrcal's printed RMS is per axis, of
+    missing or rejected as an outlier; each board through its own camera
+    (several cameras solved jointly). mrcal's printed RMS is per axis, of
     weighted residuals, and counts missing points as zeros; this is the plain
     2-D error of the points the solve used.
     """
@@ -338,7 +339,8 @@ def board_residuals(model: mrcal.cameramodel):
     if np.any(icam >= 0):
         p = np.where((icam >= 0)[:, None, None, None],
                      mrcal.transform_point_rt(oi["rt_cam_ref"][np.maximum(icam, 0)][:, None, None, :], p), p)
-    q = mrcal.project(p, oi["lensmodel"], oi["intrinsics"][0])
+    intr = oi["intrinsics"][oi["indices_frame_camintrinsics_camextrinsics"][:, 1]]  # each board's camera
+    q = mrcal.project(p, oi["lensmodel"], intr[:, None, None, :])
     e = np.linalg.norm(q - obs[..., :2], axis=-1)
     return np.where(obs[..., 2] > 0, e, np.nan)
 
