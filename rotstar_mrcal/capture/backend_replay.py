@@ -213,4 +213,13 @@ class _LazyFrames:
         return self.src.n
 
     def __getitem__(self, i: int) -> np.ndarray:
-        return self.src._image(int(i))
+        img = self.src._image(int(i))
+        if img.shape != self.shape[1:]:
+            raise CaptureError(f"{self.src.files[int(i)]}: {img.shape[1]}x{img.shape[0]}, the recording's first "
+                               f"frame is {self.shape[2]}x{self.shape[1]} (every frame of a camera has one size)")
+        return img
+
+    def check_sizes(self) -> None:
+        """Read every frame once: CaptureError naming the first whose size differs from the first frame's"""
+        for i in range(len(self)):
+            self[i]
