@@ -555,6 +555,8 @@ def test_describe_nodes_for_the_first_contact(sysfs, capsys):
     out = capsys.readouterr().out
     assert "/dev/video2" in out and "Y16   1280x800@25/15" in out and "GREY" in out and "(rectified)" in out
     assert "extension unit exposure_us = 8500" in out and "not a video-capture node" in out
+    assert "Y12I  1280x800@25/15 640x400@25/15  (left + right, unrectified: --stereo)" in out
+    assert "YUYV  1920x1080@30 424x240@30/15" in out and "MJPG  424x240@30" in out  # the RGB node
 
 
 # ---- rotstar-capture through the fake device -------------------------------------------------

@@ -262,3 +262,21 @@ def test_segment_cli_several_cameras_and_bad_input(loops, tmp_path, capsys):
     code = rotstar_segment([fns[0], str(folder), "--pattern", str(tmp_path), "--out", str(tmp_path / "y" / "pose000")])
     err = capsys.readouterr().err
     assert code == 2 and "f007.png: 320x200" in err and "640x400" in err
+
+
+def test_snapshot_shows_which_imager_is_covered(loops, tmp_path, capsys):
+    """First contact: --snapshot with the left lens covered; camera-0 (left) goes dark, camera-1 does not"""
+    left, right, colour = loops
+    fake = fake_rig((np.zeros_like(left), right, colour))
+    code = rotstar_capture(["--snapshot", str(tmp_path / "snap"), "--stereo", "--rgb-device", "/dev/video4",
+                            "--size", "640x400", "--rgb-size", "424x240", "--exposure", "4000"],
+                           source=open_fake_rig(fake))
+    out = capsys.readouterr().out.splitlines()
+    assert code == 0 and len(out) == 3
+    assert out[0].startswith("camera-0 left IR (/dev/video2 Y12I 640x400)") and "mean 0.0, max 0 (uint16)" in out[0]
+    assert out[1].startswith("camera-1 right IR") and float(out[1].split("mean ")[1].split(",")[0]) > 100
+    assert out[2].startswith("camera-2 /dev/video4 (YUYV 424x240)") and "(uint8)" in out[2]
+    img = cv2.imread(str(tmp_path / "snap" / "camera-1.png"), cv2.IMREAD_UNCHANGED)
+    k = int(out[1].split("frame ")[1])
+    np.testing.assert_array_equal(img, right[k % len(right)])  # exposure 4000 us: as simulated
+    assert fake.nodes["/dev/video2"].xu[uvc_xu.D4XX.EMITTER][3] == 0 and fake.fds == {}

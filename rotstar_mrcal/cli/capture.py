@@ -94,6 +94,10 @@ def parse_args(argv=None):
     p.add_argument("--list", action="store_true",
                    help="list every video node (USB id, formats, sizes, frame rates, controls, D4xx "
                         "extension-unit values) on stdout and exit")
+    p.add_argument("--snapshot", metavar="DIR",
+                   help="first contact: set the controls, drop --settle frames, write one frame of every camera as "
+                        "DIR/camera-<k>.png (as recorded) and print each one's mean and maximum, then exit (with "
+                        "--stereo: cover one lens to see which camera goes dark)")
     p.add_argument("--pattern", help="the pattern folder (or its pattern.json) that player.html shows")
     p.add_argument("--out", "-o", help="dataset folder (one sub-folder per exposure with --exposure)")
     g = p.add_argument_group("camera")
@@ -143,8 +147,8 @@ def parse_args(argv=None):
     r.add_argument("--keep-raw", action="store_true", help="keep every recording as OUT/raw/<pose>_<exposure>.npy (+ .json)")
     add_segment_options(p)
     a = p.parse_args(argv)
-    if not a.list and (not a.pattern or not a.out):
-        p.error("--pattern and --out are needed (or --list)")
+    if not a.list and not a.snapshot and (not a.pattern or not a.out):
+        p.error("--pattern and --out are needed (or --list, --snapshot)")
     if a.backend == "replay" and a.exposure:
         p.error("a replay has the exposure it was recorded with: drop --exposure")
     if (a.stereo or a.rgb_device) and a.backend != "v4l2":
@@ -170,7 +174,9 @@ def print_nodes(nodes: list[dict]) -> None:
             continue
         for fmt, modes in n.get("modes", {}).items():
             warn = format_warning(fmt) if n.get("xu") else None
-            print(f"  {fmt:5s} {' '.join(modes)}" + ("  (rectified)" if warn else ""))
+            label = "  (rectified)" if warn else "  (left + right, unrectified: --stereo)" \
+                if fmt == "Y12I" and n.get("xu") else ""
+            print(f"  {fmt:5s} {' '.join(modes)}{label}")
         for name, v in n.get("controls", {}).items():
             print(f"  control {name} = {v}")
         for name, v in n.get("xu", {}).items():
@@ -235,6 +241,31 @@ def open_rig(a, fps) -> FrameSource:
     return RigSource(sources)
 
 
+def snapshot(a, src: FrameSource, names: list[str]) -> int:
+    """--snapshot: one frame per camera to DIR, and their levels on stdout"""
+    import cv2
+
+    os.makedirs(a.snapshot, exist_ok=True)
+    gain, emitter = default_controls(a)
+    if emitter != "keep":
+        control(a, f"emitter {emitter}", src.set_emitter, emitter == "on")
+    if gain is not None:
+        control(a, f"gain {gain:g}", src.set_gain, gain)
+    if a.exposure:
+        control(a, f"exposure {a.exposure[0]} us", src.set_exposure_us, a.exposure[0])
+    src.start()
+    skip(src, a.settle)
+    views = src.read_views() if isinstance(src, RigSource) else [src.read()]
+    if views is None or views[0] is None:
+        raise CaptureError("no frame")
+    for k, (f, name) in enumerate(zip(views, names)):
+        fn = os.path.join(a.snapshot, f"camera-{k}.png")
+        cv2.imwrite(fn, f.image)
+        print(f"camera-{k} {name}: {fn}, mean {float(f.image.mean()):.1f}, max {int(f.image.max())} "
+              f"({f.image.dtype}), frame {f.sequence}")
+    return 0
+
+
 def main(argv=None, source: FrameSource | None = None) -> int:
     return run("rotstar-capture", lambda argv: _main(argv, source), argv)
 
@@ -244,6 +275,23 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
     if a.list:
         print_nodes(describe_nodes())
         return 0
+    if a.snapshot:
+        fps = a.fps or DEFAULT_FPS
+        try:
+            src = source or (open_rig(a, fps) if a.stereo or a.rgb_device else
+                             open_source(a.backend, a.device, a.camera, a.fourcc, a.size, fps, a.serial))
+        except CaptureError as e:
+            fail(str(e), EXIT_FAILED)
+        try:
+            return snapshot(a, src, camera_names(src) if isinstance(src, RigSource) else [getattr(src, "path", "")])
+        except CaptureError as e:
+            say(f"rotstar-capture: {e}")
+            return EXIT_FAILED
+        finally:
+            try:
+                src.stop()
+            finally:
+                src.close()
     try:
         pattern, layout = dataset.read_pattern(a.pattern)
     except dataset.DatasetError as e:
