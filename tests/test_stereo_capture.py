@@ -25,7 +25,7 @@ from rotstar_mrcal.capture import uvc_xu, v4l2
 from rotstar_mrcal.capture.backend_replay import save_recording
 from rotstar_mrcal.capture.backend_v4l2 import V4L2Source
 from rotstar_mrcal.capture.colour import pack_yuyv, to_grey
-from rotstar_mrcal.capture.interleaved import pack_y12i
+from rotstar_mrcal.capture.interleaved import pack_y8i, pack_y12i
 from rotstar_mrcal.capture.rig import RigSource, record_rig
 from rotstar_mrcal.capture.rig_segment import segment_rig
 from rotstar_mrcal.capture.segment import SegmentError
@@ -177,15 +177,24 @@ def test_capture_cli_both_imagers_and_colour(loops, tmp_path, capsys, monkeypatc
         assert f"camera-{k}: board found" in err
 
 
-def test_y8i_is_labelled_rectified(tmp_path, capsys):
+def test_y8i_both_halves_and_labelled_rectified(tmp_path, capsys, monkeypatch):
     (tmp_path / "pattern.json").write_text(LAYOUT.to_json())
-    fake = FakeD435(lambda k, w, h, code: np.zeros((h, w * 2), np.uint8))
+    y, x = np.mgrid[0:800, 0:1280]
+    left, right = (x % 256).astype(np.uint8), (y % 200).astype(np.uint8)
+    fake = FakeD435(lambda k, w, h, code: pack_y8i(left, right))
+    src = V4L2Source("/dev/video2", fourcc="Y8I", size=(1280, 800), fps=30, sys=fake, stereo=True)
+    src.start()
+    got = src.read_views()
+    src.close()
+    np.testing.assert_array_equal(got[0].image, left)
+    np.testing.assert_array_equal(got[1].image, right)
     src = RigSource([V4L2Source("/dev/video2", fourcc="Y8I", size=(1280, 800), fps=30, sys=fake, stereo=True)])
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\nq\n"))
     code = rotstar_capture(["--pattern", str(tmp_path), "--out", str(tmp_path / "s"), "--stereo", "--stereo-format",
-                            "Y8I", "--poses", "1", "--frames", "5", "--auto"], source=src)
+                            "Y8I", "--frames", "5"], source=src)
     err = capsys.readouterr().err
     assert "warning: Y8I frames are rectified" in err and "quick look" in err
-    assert code == 1  # (black frames: no board)
+    assert code == 1 and "pose000: not usable: the recording is too short: 5 frame(s)" in err and "(on camera-0, camera-1)" in err
 
 
 # ---- one set of frame boundaries ---------------------------------------------------------------

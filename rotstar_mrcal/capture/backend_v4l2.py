@@ -85,6 +85,7 @@ class V4L2Source(FrameSource):
             raise
         self.code = self.format.fourcc
         self.views = 2 if stereo or self.code == "Y12I" else 1
+        self.dev.raw_bytes = self.views == 2  # (Y8I as both halves, not the left one)
         dtype = PIXEL_FORMATS[self.code][0] if self.code in PIXEL_FORMATS else "u2" if self.code == "Y12I" else "u1"
         self.full_scale = 255.0 if dtype == "u1" else 65535.0
         self.path = path

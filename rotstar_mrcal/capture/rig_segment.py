@@ -147,9 +147,12 @@ def segment_rig(recordings: list, frames_list: list[dict], layout: Layout, full_
             ref_seg, ref = segment(recordings[k], frames_list, layout, full_scales[k], opts), k
             break
         except SegmentError as e:
-            errors.append(f"{names[k]}: {e}")
+            errors.append((names[k], str(e)))
     if ref_seg is None:
-        raise SegmentError("; ".join(errors))
+        if len({e for _, e in errors}) == 1:
+            raise SegmentError(errors[0][1] + (f" (on {', '.join(n for n, _ in errors)})" if len(errors) > 1 else ""))
+        raise SegmentError("; ".join(f"{n}: {e}" for n, e in errors))
+    errors = [f"{n}: {e}" for n, e in errors]
     if errors:
         notes.append(f"boundaries from {names[ref]}, as " + "; ".join(errors))
     loop = player_loop(frames_list)

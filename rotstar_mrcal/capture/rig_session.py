@@ -35,7 +35,8 @@ import numpy as np
 from .pose import write_segmented
 from .rig import RigSource, record_rig
 from .rig_segment import segment_rig
-from .segment import SegmentError
+from .motion import difference_signal, screen_pixels
+from .segment import SegmentError, threshold
 from .session import OutputDataset, PoseOutcome, SessionOptions, process_segmented
 
 
@@ -102,6 +103,9 @@ def process_rig_recording(ds: RigDataset, pose: str, pattern: dict, layout, recs
         rs = segment_rig([r.frames for r in recs], pattern["frames"], layout, [r.full_scale for r in recs],
                          opts.segment)
     except SegmentError as e:
+        so, f = opts.segment, recs[0]
+        d, _ = difference_signal(f.frames, f.full_scale, so.step, screen_pixels(f.frames, f.full_scale, so.step))
+        ds.tau = threshold(d, so.k, so.ratio)  # (for --auto: what segment() would have set)
         entry.update(ok=False, error=str(e))
         return PoseOutcome(False, [f"{ds.what(pose)}: not usable: {e}"])
     ds.tau = rs.cameras[0].tau

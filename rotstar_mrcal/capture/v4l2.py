@@ -418,9 +418,9 @@ def frame_bytes(data, fmt: PixFormat, bytesused: int | None = None) -> np.ndarra
         if n == 0:
             raise V4L2Error(f"empty {fmt.fourcc.strip()} frame")
         return np.frombuffer(data, np.uint8, count=n).copy()
-    if fmt.fourcc not in PACKED_FORMATS:
-        raise V4L2Error(f"pixel format {fmt.fourcc!r} is not a packed format")
-    row = fmt.width * PACKED_FORMATS[fmt.fourcc][0]
+    if not bytes_per_pixel(fmt.fourcc):
+        raise V4L2Error(f"pixel format {fmt.fourcc!r} is not supported here")
+    row = fmt.width * bytes_per_pixel(fmt.fourcc)
     bpl = fmt.bytesperline or row
     need = bpl * (fmt.height - 1) + row
     if n < need:
@@ -444,6 +444,7 @@ class Device:
             raise V4L2Error(f"{path}: cannot open ({e.strerror}); is the camera plugged in, and may this user "
                             f"open it (group 'video')?") from None
         self.format: PixFormat | None = None
+        self.raw_bytes = False  # read() returns every format's bytes (frame_bytes): both halves of Y8I
         self._buffers: list = []
         self._requested = False
         self._streaming = False
@@ -649,8 +650,8 @@ class Device:
             try:
                 if b.flags & BUF_FLAG_ERROR:
                     continue
-                img = (frame_array if self.format.fourcc in PIXEL_FORMATS else frame_bytes)(
-                    self._buffers[b.index], self.format, b.bytesused)
+                as_array = self.format.fourcc in PIXEL_FORMATS and not self.raw_bytes
+                img = (frame_array if as_array else frame_bytes)(self._buffers[b.index], self.format, b.bytesused)
             finally:
                 self._queue(b.index)
             t = b.timestamp.tv_sec * 1_000_000_000 + b.timestamp.tv_usec * 1000
