@@ -26,6 +26,7 @@ from rotstar_mrcal.capture.backend_replay import save_recording
 from rotstar_mrcal.capture.backend_v4l2 import V4L2Source
 from rotstar_mrcal.capture.colour import pack_yuyv, to_grey
 from rotstar_mrcal.capture.interleaved import pack_y8i, pack_y12i
+from rotstar_mrcal.capture.pose import quick_check
 from rotstar_mrcal.capture.rig import RigSource, record_rig
 from rotstar_mrcal.capture.rig_segment import segment_rig
 from rotstar_mrcal.capture.segment import SegmentError
@@ -206,10 +207,26 @@ def lockstep(loops, n=330, colour_lag=0.0):
     return [left[k % len(left)], right[k % len(right)], colour[j % len(colour)]]
 
 
+def true_corners():
+    """The true corners of the left, right and colour camera (the left view resampled by area to 424x240)"""
+    model = simulate.preset_model("pinhole-small")
+    rt = simulate.random_poses(model, LAYOUT, 2, np.random.default_rng(3))
+    left, right = (simulate.true_corners(model, LAYOUT, r) for r in rt)
+    scale = np.array(COLOUR_SIZE) / np.array([640, 400])
+    return [left, right, (left + 0.5) * scale - 0.5]
+
+
 def test_segment_rig_same_boundaries(loops):
+    """Every camera's segmented frames give its true corners: the lockstep colour camera's too"""
     recs = lockstep(loops)
     rs = segment_rig(recs, LAYOUT.frames(), LAYOUT, [65535, 65535, 255])
     assert rs.reference == 0
+    for k, (seg, truth, fs) in enumerate(zip(rs.cameras, true_corners(), (4095, 4095, 255))):
+        r = quick_check(seg, LAYOUT, json.loads(LAYOUT.to_json()), fs)
+        err = np.linalg.norm(r.corners - truth, axis=-1)
+        print(f"camera-{k}: {r.n_valid} corners, {np.sqrt(np.mean(err ** 2)):.4f} px RMS from the truth, "
+              f"worst {err.max():.4f} px")
+        assert r.n_valid == 24 and np.sqrt(np.mean(err ** 2)) < 0.02 and err.max() < 0.04
     assert rs.cameras[1].ranges == rs.cameras[0].ranges
     for f in FILES:
         a0, b0 = rs.cameras[0].ranges[f]
