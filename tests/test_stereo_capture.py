@@ -306,3 +306,33 @@ def test_snapshot_shows_which_imager_is_covered(loops, tmp_path, capsys):
     k = int(out[1].split("frame ")[1])
     np.testing.assert_array_equal(img, right[k % len(right)])  # exposure 4000 us: as simulated
     assert fake.nodes["/dev/video2"].xu[uvc_xu.D4XX.EMITTER][3] == 0 and fake.fds == {}
+
+
+def test_segment_a_raw_y12i_dump(loops, tmp_path, capsys):
+    """`v4l2-ctl --stream-to` in Y12I -> rotstar-segment --fourcc Y12I: camera-0 (left) and camera-1 (right), the same
+    as splitting the left and right recordings"""
+    (tmp_path / "pattern.json").write_text(LAYOUT.to_json())
+    left, right, _ = lockstep(loops, n=240)
+    with open(tmp_path / "dump.raw", "wb") as f:
+        for a, b in zip(left, right):
+            f.write(pack_y12i(a, b).tobytes())
+    code = rotstar_segment([str(tmp_path / "dump.raw"), "--size", "640x400", "--fourcc", "Y12I", "--pattern",
+                            str(tmp_path), "--out", str(tmp_path / "raw" / "pose000"), "--no-check"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "camera-0: " + str(tmp_path / "dump.raw") + " (left imager): 240 frames of 640x400, 16-bit" in err
+    for k, r in enumerate((left, right)):
+        save_recording(str(tmp_path / f"camera-{k}.npy"), r)
+    code = rotstar_segment([str(tmp_path / "camera-0.npy"), str(tmp_path / "camera-1.npy"), "--pattern",
+                            str(tmp_path), "--out", str(tmp_path / "npy" / "pose000"), "--no-check"])
+    assert code == 0
+    for k in range(2):
+        a = cv2.imread(str(tmp_path / "raw" / "pose000" / f"camera-{k}" / "rotstar_05.png"), cv2.IMREAD_UNCHANGED)
+        b = cv2.imread(str(tmp_path / "npy" / "pose000" / f"camera-{k}" / "rotstar_05.png"), cv2.IMREAD_UNCHANGED)
+        np.testing.assert_array_equal(a, b)
+    with open(tmp_path / "dump.raw", "ab") as f:
+        f.write(b"\0")
+    code = rotstar_segment([str(tmp_path / "dump.raw"), "--size", "640x400", "--fourcc", "Y12I", "--pattern",
+                            str(tmp_path), "--out", str(tmp_path / "bad" / "pose000")])
+    err = capsys.readouterr().err
+    assert code == 2 and "is not a whole number of 640x400 Y12I frames (768000 bytes each)" in err

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import re
@@ -11,7 +12,7 @@ import sys
 import numpy as np
 
 from .. import dataset
-from ..capture.backend_replay import ReplaySource
+from ..capture.backend_replay import ReplaySource, stereo_raw
 from ..capture.pose import quick_check, value_scale, write_segmented
 from ..capture.rig_segment import check_recordings, segment_rig
 from ..capture.segment import SegmentError, segment
@@ -72,9 +73,13 @@ def parse_args(argv=None):
     p.add_argument("--pattern", required=True, help="pattern.json (or the folder holding it) that the player showed")
     p.add_argument("--out", "-o", required=True, help="the pose folder to write, SEQ/<pose>")
     p.add_argument("--size", type=size_arg, help="WIDTHxHEIGHT of a .raw recording")
-    p.add_argument("--fourcc", help="pixel format of a .raw recording: GREY, Y16 or Y8I")
+    p.add_argument("--fourcc", help="pixel format of a .raw recording: GREY, Y16 or Y8I (its left imager); Y12I or "
+                                    "Y8I with --stereo: both imagers")
     p.add_argument("--plot", metavar="PNG", help="also plot the difference signal, the threshold and the stretches")
     p.add_argument("--no-check", action="store_true", help="do not run the quick board detection")
+    p.add_argument("--stereo", action="store_true",
+                   help="RECORDING is a raw dump of both infrared imagers (`v4l2-ctl --stream-to` in Y12I, or Y8I): "
+                        "split into camera-0 (left) and camera-1 (right); --fourcc Y12I implies it")
     p.add_argument("--reference", type=int, metavar="K",
                    help="several cameras: the camera whose recording sets the frame boundaries (default: camera 0, "
                         "or the first that can be split)")
@@ -132,7 +137,10 @@ def camera_recordings(paths: list[str]) -> list[str]:
 def _main(argv=None) -> int:
     a = parse_args(argv)
     a.recording = camera_recordings(a.recording)
-    if len(a.recording) > 1:
+    a.stereo = a.stereo or (a.fourcc or "").strip().upper() == "Y12I"
+    if a.stereo and len(a.recording) != 1:
+        fail("--stereo splits one raw dump of both imagers; give one recording")
+    if len(a.recording) > 1 or a.stereo:
         return _main_rig(a)
     a.recording = a.recording[0]
     try:
@@ -215,6 +223,39 @@ def _scale(a, seg, full_scale: float, what: str) -> float:
     return scale
 
 
+@dataclasses.dataclass
+class CameraRecording:
+    what: str  # the file, and which imager of a dump of both
+    frames: object  # indexable (T, H, W)
+    full_scale: float
+    sequence: np.ndarray
+    notes: list
+
+
+def load_cameras(a) -> list[CameraRecording]:
+    """Every camera's recording: one file each, or the two imagers of one raw dump (--stereo)"""
+    try:
+        if a.stereo:
+            if not a.size or not a.fourcc:
+                fail(f"{a.recording[0]}: a raw dump of both imagers needs --size WxH and --fourcc Y12I (or Y8I)")
+            views = stereo_raw(a.recording[0], a.size, a.fourcc)
+            fs = 65535.0 if views[0].dtype == np.uint16 else 255.0
+            path = os.path.abspath(a.recording[0])
+            return [CameraRecording(f"{path} ({side} imager)", v, fs, np.arange(len(v)), [])
+                    for side, v in zip(("left", "right"), views)]
+        out = []
+        for fn in a.recording:
+            src = ReplaySource(fn, size=a.size, fourcc=a.fourcc)
+            frames = src.frames()
+            if hasattr(frames, "check_sizes"):
+                frames.check_sizes()
+            out.append(CameraRecording(os.path.abspath(fn), frames, src.full_scale, src.sequence_numbers(),
+                                       src.notes))
+        return out
+    except CaptureError as e:
+        fail(str(e))
+
+
 def _main_rig(a) -> int:
     """Several cameras' recordings -> OUT/camera-<k>/ split with the same frame boundaries"""
     try:
@@ -223,9 +264,9 @@ def _main_rig(a) -> int:
         fail(str(e))
     out = os.path.normpath(a.out)
     seq, pose = os.path.dirname(out) or ".", os.path.basename(out)
-    inputs = a.recording + [dataset.pattern_file(a.pattern)]
+    inputs = list(a.recording) + [dataset.pattern_file(a.pattern)]
     check_output_path(out, inputs, folder=True)
-    n_cam = len(a.recording)
+    n_cam = 2 if a.stereo else len(a.recording)
     if a.reference is not None and not 0 <= a.reference < n_cam:
         fail(f"--reference {a.reference}: there are cameras 0-{n_cam - 1}")
     names = [f"camera-{k}" for k in range(n_cam)]
@@ -233,27 +274,19 @@ def _main_rig(a) -> int:
     busy = [n for n in names if os.path.isdir(os.path.join(out, n)) and files & set(os.listdir(os.path.join(out, n)))]
     if busy and not a.force:
         fail(f"{os.path.join(out, busy[0])} already holds frames (use --force to overwrite)")
-    srcs, frames = [], []
-    try:
-        for fn in a.recording:
-            srcs.append(ReplaySource(fn, size=a.size, fourcc=a.fourcc))
-            frames.append(srcs[-1].frames())
-        for f in frames:
-            if hasattr(f, "check_sizes"):
-                f.check_sizes()
-    except CaptureError as e:
-        fail(str(e))
-    for name, fn, src, f in zip(names, a.recording, srcs, frames):
-        for note in src.notes:
+    cams = load_cameras(a)
+    for name, c in zip(names, cams):
+        for note in c.notes:
             say(f"rotstar-segment: note: {note}")
-        say(f"rotstar-segment: {name}: {fn}: {len(f)} frames of {f.shape[2]}x{f.shape[1]}, "
-            f"{'16' if src.full_scale == 65535 else '8'}-bit")
+        say(f"rotstar-segment: {name}: {c.what}: {len(c.frames)} frames of {c.frames.shape[2]}x{c.frames.shape[1]}, "
+            f"{'16' if c.full_scale == 65535 else '8'}-bit")
+    frames = [c.frames for c in cams]
     try:
-        check_recordings(frames, [f"{n} ({fn})" for n, fn in zip(names, a.recording)])
+        check_recordings(frames, [f"{n} ({c.what})" for n, c in zip(names, cams)])
     except SegmentError as e:
         fail(str(e))
     try:
-        rs = segment_rig(frames, pattern["frames"], layout, [s.full_scale for s in srcs], options_from(a),
+        rs = segment_rig(frames, pattern["frames"], layout, [c.full_scale for c in cams], options_from(a),
                          a.reference, names)
     except SegmentError as e:
         fail(str(e), EXIT_FAILED)
@@ -263,15 +296,14 @@ def _main_rig(a) -> int:
     for n in rs.notes:
         say(f"rotstar-segment: note: {n}")
     try:
-        for k, (name, fn, src, seg) in enumerate(zip(names, a.recording, srcs, rs.cameras)):
-            scale = _scale(a, seg, src.full_scale, name)
-            seqnums = src.sequence_numbers()
-            gaps = int(np.sum(np.maximum(np.diff(seqnums) - 1, 0))) if len(seqnums) > 1 else 0
-            folder = write_segmented(seq, f"{pose}/{name}", seg, pattern, src.full_scale, scale,
-                                     {"recording": os.path.abspath(fn), "dropped_camera_frames": gaps,
+        for name, c, seg in zip(names, cams, rs.cameras):
+            scale = _scale(a, seg, c.full_scale, name)
+            gaps = int(np.sum(np.maximum(np.diff(c.sequence) - 1, 0))) if len(c.sequence) > 1 else 0
+            folder = write_segmented(seq, f"{pose}/{name}", seg, pattern, c.full_scale, scale,
+                                     {"recording": c.what, "dropped_camera_frames": gaps,
                                       "camera": name, "boundaries_from": names[rs.reference]})
             if not a.no_check:
-                r = quick_check(seg, layout, pattern, src.full_scale / scale)
+                r = quick_check(seg, layout, pattern, c.full_scale / scale)
                 n = layout.nx * layout.ny
                 say(f"rotstar-segment: {name}: board found: {r.n_valid} of {n} corners" if r.found
                     else f"rotstar-segment: {name}: no board: {r.error}")
