@@ -23,7 +23,9 @@ values. Which half is the left imager, the sources disagree:
     librealsense (src/proc/y12i-to-y16y16.cpp, and every version since the
     legacy rsimpl image.cpp): struct y12i_pixel { rl:8, rh:4, ll:4, lh:8 },
     left = lh << 4 | ll, right = rh << 8 | rl: the RIGHT imager in the low
-    12 bits (b0 and the low nibble of b1), the LEFT in the high 12 bits;
+    12 bits (b0 and the low nibble of b1), the LEFT in the high 12 bits
+    (its MIPI variant, y12i-to-y16y16-mipi.cpp for the D457, has the same
+    bits and one byte of padding a pixel: not a USB D435's format);
 
     the kernel's description (Documentation/userspace-api/media/v4l/
     pixfmt-y12i.rst: "left0 = 0xfff & *(__u16 *)buf; right0 = *(__u16
