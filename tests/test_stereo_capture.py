@@ -336,3 +336,18 @@ def test_segment_a_raw_y12i_dump(loops, tmp_path, capsys):
                             str(tmp_path), "--out", str(tmp_path / "bad" / "pose000")])
     err = capsys.readouterr().err
     assert code == 2 and "is not a whole number of 640x400 Y12I frames (768000 bytes each)" in err
+
+
+def test_capture_arguments_for_several_cameras(tmp_path, capsys):
+    (tmp_path / "pattern.json").write_text(LAYOUT.to_json())
+    base = ["--pattern", str(tmp_path), "--out", str(tmp_path / "s")]
+    with pytest.raises(SystemExit) as e:
+        rotstar_capture(base + ["--stereo", "--backend", "replay", "--device", "rec.npy"])
+    assert e.value.code == 2 and "--stereo and --rgb-device record over V4L2" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        rotstar_capture(base + ["--stereo-format", "Y16"])
+    assert e.value.code == 2
+    fake = FakeD435()
+    with pytest.raises(Exception, match="Y16 is not a stereo format"):
+        V4L2Source("/dev/video2", fourcc="Y16", sys=fake, stereo=True)
+    assert fake.fds == {}
