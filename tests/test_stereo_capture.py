@@ -139,7 +139,7 @@ def test_capture_cli_both_imagers_and_colour(loops, tmp_path, capsys, monkeypatc
     out_dir = tmp_path / "seq"
     code = rotstar_capture(["--pattern", str(tmp_path), "--out", str(out_dir), "--size", "640x400", "--stereo",
                             "--rgb-device", "/dev/video4", "--rgb-size", "424x240", "--exposure", "4000",
-                            "--frames", "330", "--keep-raw"], source=open_fake_rig(fake))
+                            "--frames", "240", "--keep-raw"], source=open_fake_rig(fake))
     out, err = capsys.readouterr()
     assert code == 0, err
     pose = out_dir / "exp4000us" / "pose000"
@@ -199,7 +199,7 @@ def test_y8i_both_halves_and_labelled_rectified(tmp_path, capsys, monkeypatch):
 
 
 # ---- one set of frame boundaries ---------------------------------------------------------------
-def lockstep(loops, n=330, colour_lag=0.0):
+def lockstep(loops, n=240, colour_lag=0.0):
     """The three recordings as RigSource takes them: the colour camera's newest frame at each infrared frame"""
     left, right, colour = loops
     k = np.arange(n)
@@ -240,7 +240,7 @@ def test_segment_rig_same_boundaries(loops):
 
 def test_segment_rig_bad_input(loops):
     recs = lockstep(loops)
-    with pytest.raises(SegmentError, match=r"different frame counts \(camera-0: 330, camera-1: 330, camera-2: 329\)"):
+    with pytest.raises(SegmentError, match=r"different frame counts \(camera-0: 240, camera-1: 240, camera-2: 239\)"):
         segment_rig([recs[0], recs[1], recs[2][:-1]], LAYOUT.frames(), LAYOUT, [65535, 65535, 255])
     # a colour camera half a display frame behind: its frames change in the middle of camera 0's ranges
     late = lockstep(loops, colour_lag=0.15)
@@ -274,16 +274,16 @@ def test_segment_cli_several_cameras_and_bad_input(loops, tmp_path, capsys):
     assert all((tmp_path / "seq" / "pose000" / f"camera-{k}" / "identity_00.png").exists() for k in range(3))
     assert (tmp_path / "seq" / "pattern.json").exists()
     # different frame counts: one line, exit 2
-    save_recording(fns[2], recs[2][:300], fps=25)
+    save_recording(fns[2], recs[2][:200], fps=25)
     code = rotstar_segment(fns + ["--pattern", str(tmp_path), "--out", str(tmp_path / "x" / "pose000")])
     err = capsys.readouterr().err
     last = err.strip().splitlines()[-1]
     assert code == 2 and last.startswith("rotstar-segment: the cameras hold different frame counts")
-    assert f"camera-2 ({fns[2]}): 300" in last and f"camera-0 ({fns[0]}): 330" in last
+    assert f"camera-2 ({fns[2]}): 200" in last and f"camera-0 ({fns[0]}): 240" in last
     # one camera's frames differ in size: a folder of frames with one odd frame
     folder = tmp_path / "cam1"
     folder.mkdir()
-    for t in range(330):
+    for t in range(240):
         cv2.imwrite(str(folder / f"f{t:03d}.png"), np.zeros((400, 640) if t != 7 else (200, 320), np.uint16))
     code = rotstar_segment([fns[0], str(folder), "--pattern", str(tmp_path), "--out", str(tmp_path / "y" / "pose000")])
     err = capsys.readouterr().err
