@@ -139,7 +139,7 @@ def test_capture_cli_both_imagers_and_colour(loops, tmp_path, capsys, monkeypatc
     out_dir = tmp_path / "seq"
     code = rotstar_capture(["--pattern", str(tmp_path), "--out", str(out_dir), "--size", "640x400", "--stereo",
                             "--rgb-device", "/dev/video4", "--rgb-size", "424x240", "--exposure", "4000",
-                            "--frames", "240", "--keep-raw"], source=open_fake_rig(fake))
+                            "--frames", "330", "--keep-raw"], source=open_fake_rig(fake))
     out, err = capsys.readouterr()
     assert code == 0, err
     pose = out_dir / "exp4000us" / "pose000"
