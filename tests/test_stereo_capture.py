@@ -32,6 +32,7 @@ from rotstar_mrcal.capture.rig_segment import segment_rig
 from rotstar_mrcal.capture.segment import SegmentError
 from rotstar_mrcal.capture.simulated import camera_stream, loop_irradiance, player_schedule
 from rotstar_mrcal.cli.capture import main as rotstar_capture
+from rotstar_mrcal.cli.detect import main as rotstar_detect
 from rotstar_mrcal.cli.segment import main as rotstar_segment
 from rotstar_mrcal.display.loop import player_loop
 from rotstar_mrcal.pattern.layout import make_layout
@@ -44,12 +45,21 @@ HOLD, LOOP_S = 18, N_ENTRIES * 18 / 60  # 6 s a loop
 COLOUR_SIZE, COLOUR_FPS, COLOUR_T0 = (424, 240), 30, 0.023
 
 
+def stereo_poses(model):
+    """rt_cam_board of the left camera (a random pose) and of the right one, a tenth of the distance to its right"""
+    import mrcal
+
+    rt0 = simulate.random_poses(model, LAYOUT, 1, np.random.default_rng(3))[0]
+    baseline = 0.1 * float(rt0[5])
+    return [rt0, mrcal.compose_rt(np.array([0, 0, 0, -baseline, 0, 0.0]), rt0)]
+
+
 @pytest.fixture(scope="module")
 def loops():
     """One loop of each camera (repeating seamlessly): left, right (uint16, 12-bit values, 640x400, 150 frames at
     25 fps) and colour (uint8, 424x240, 180 frames at 30 fps on a clock 23 ms behind)"""
     model = simulate.preset_model("pinhole-small")
-    rt = simulate.random_poses(model, LAYOUT, 2, np.random.default_rng(3))
+    rt = stereo_poses(model)
     sched = player_schedule(N_ENTRIES, hold=HOLD, duration=LOOP_S + 1)
     out = []
     for r in rt:
@@ -167,6 +177,14 @@ def test_capture_cli_both_imagers_and_colour(loops, tmp_path, capsys, monkeypatc
     assert log["source"]["cameras"] == 3 and log["source"]["sources"][1]["format"]["fourcc"] == "YUYV"
     assert log["poses"]["exp4000us"][0]["ok"] and log["poses"]["exp4000us"][0]["reference"] == 0
 
+    # the multi-camera dataset as doc/dataset.md reads it: rotstar-detect finds every camera's board
+    code = rotstar_detect([str(out_dir / "exp4000us"), "-o", str(tmp_path / "corners.vnl")])
+    out, err = capsys.readouterr()
+    assert all(f"camera-{k}: 1 of 1 poses gave a board" in err for k in range(3)), err
+    assert code == 1 and "mrcal needs at least 2 per camera" in err  # (one pose: corners, but no command)
+    paths = [ln.split()[0] for ln in (tmp_path / "corners.vnl").read_text().splitlines() if not ln.startswith("#")]
+    assert {p.split("/")[-2] for p in paths} == {"camera-0", "camera-1", "camera-2"}
+
     # rotstar-segment splits the kept recordings again into the same layout
     code = rotstar_segment([str(raw), "--pattern", str(tmp_path), "--out", str(tmp_path / "again" / "pose000")])
     out, err = capsys.readouterr()
@@ -210,8 +228,7 @@ def lockstep(loops, n=240, colour_lag=0.0):
 def true_corners():
     """The true corners of the left, right and colour camera (the left view resampled by area to 424x240)"""
     model = simulate.preset_model("pinhole-small")
-    rt = simulate.random_poses(model, LAYOUT, 2, np.random.default_rng(3))
-    left, right = (simulate.true_corners(model, LAYOUT, r) for r in rt)
+    left, right = (simulate.true_corners(model, LAYOUT, r) for r in stereo_poses(model))
     scale = np.array(COLOUR_SIZE) / np.array([640, 400])
     return [left, right, (left + 0.5) * scale - 0.5]
 
