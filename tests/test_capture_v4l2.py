@@ -9,6 +9,13 @@ GET_LEN, ranges, read-back), mmap buffers, a dropped frame (a gap in the
 sequence numbers) and a corrupt one (V4L2_BUF_FLAG_ERROR). Every ioctl checks
 that the structure's size matches the size encoded in the request number.
 A fake sysfs tree gives the USB ids the node finder reads.
+
+Every node streams on its own (buffers, queue, frame counter) on one
+clock: a node's frame k exists at t0 + k / fps; dequeuing a frame that does
+not exist yet waits for it (the clock advances), and select without a
+timeout says whether one is waiting, so several nodes streamed together
+behave like cameras running side by side (the rig tests). The IR node also
+serves Y12I (both imagers), the RGB node YUYV and MJPG.
 """
 
 from __future__ import annotations
@@ -45,6 +52,12 @@ class FakeNode:
             uvc_xu.D4XX.AUTO_EXPOSURE: [1, 0, 1, 1],
         } if xu else {}
         self.padding = padding
+        self.frames = None  # callable(k, w, h, code) -> image bytes; None: the device's
+        self.t0 = 0.0  # time of frame 0, s
+        self.buffers: list = []
+        self.queued: list[int] = []
+        self.streaming = False
+        self.made = 0  # frames the camera produced (including dropped ones)
         first = next(iter(modes))
         w, h = next(iter(modes[first]))
         self.fmt = [first, w, h]
@@ -59,6 +72,7 @@ class FakeD435(v4l2.Syscalls):
             "GREY": {(1280, 800): [30, 15], (640, 400): [30, 15]},
             "Y8I ": {(1280, 800): [30, 15]},
             "Y16 ": {(1280, 800): [25, 15], (640, 400): [25, 15]},
+            "Y12I": {(1280, 800): [25, 15], (640, 400): [25, 15]},
         }
         self.nodes = {
             "/dev/video0": FakeNode(b"Intel(R) RealSense(TM) Depth Ca", 0x84200001, {"Z16 ": {(1280, 720): [30]}}),
@@ -67,7 +81,8 @@ class FakeD435(v4l2.Syscalls):
             "/dev/video2": FakeNode(b"Intel(R) RealSense(TM) Depth Ca", 0x84200001, ir_modes, padding=padding),
             "/dev/video3": FakeNode(b"Intel(R) RealSense(TM) Depth Ca", 0x84A00000, {"Z16 ": {(1, 1): [30]}},
                                     controls=False),
-            "/dev/video4": FakeNode(b"Intel(R) RealSense(TM) Depth Ca", 0x84200001, {"YUYV": {(1920, 1080): [30]}},
+            "/dev/video4": FakeNode(b"Intel(R) RealSense(TM) Depth Ca", 0x84200001,
+                                    {"YUYV": {(1920, 1080): [30], (424, 240): [30, 15]}, "MJPG": {(424, 240): [30]}},
                                     interface=3, xu=False),
             "/dev/video5": FakeNode(b"HD Webcam", 0x84200001, {"YUYV": {(640, 480): [30]}}, usb=(0x046D, 0x0825)),
         }
@@ -78,10 +93,14 @@ class FakeD435(v4l2.Syscalls):
         self.fds: dict[int, str] = {}
         self.next_fd = 100
         self.calls: list[str] = []
-        self.buffers: list = []
-        self.queued: list[int] = []
-        self.streaming = False
-        self.made = 0  # frames the camera produced (including dropped ones)
+        self.now = 0.0  # the clock, s: the time of the latest frame dequeued on any node
+
+    @property
+    def streaming(self) -> bool:
+        return any(n.streaming for n in self.nodes.values())
+
+    def frame_time(self, n: FakeNode, k: int) -> float:
+        return n.t0 + k / n.fps
 
     # ---- syscalls ----------------------------------------------------------------
     def open(self, path):
@@ -96,21 +115,33 @@ class FakeD435(v4l2.Syscalls):
 
     def mmap(self, fd, length, offset):
         i = offset // 0x100000
-        assert self.buffers[i] is None and length == self.sizeimage(self.node(fd))
-        self.buffers[i] = mmap.mmap(-1, length)
-        return self.buffers[i]
+        n = self.node(fd)
+        assert n.buffers[i] is None and length == self.sizeimage(n)
+        n.buffers[i] = mmap.mmap(-1, length)
+        return n.buffers[i]
 
     def select(self, fd, timeout):
-        return self.streaming and bool(self.queued)
+        n = self.node(fd)
+        if not (n.streaming and n.queued):
+            return False
+        if timeout > 0:
+            return True  # (waits for the next frame)
+        k = n.made
+        while k in self.drop:
+            k += 1
+        return self.frame_time(n, k) <= self.now + 1e-9
 
     def node(self, fd) -> FakeNode:
         return self.nodes[self.fds[fd]]
 
     def bytesperline(self, n: FakeNode) -> int:
-        dt, spp, _ = v4l2.PIXEL_FORMATS.get(n.fmt[0], ("u1", 2, ""))
-        return n.fmt[1] * spp * np.dtype(dt).itemsize + n.padding
+        if n.fmt[0] == "MJPG":
+            return 0
+        return n.fmt[1] * (v4l2.bytes_per_pixel(n.fmt[0]) or 2) + n.padding
 
     def sizeimage(self, n: FakeNode) -> int:
+        if n.fmt[0] == "MJPG":
+            return n.fmt[1] * n.fmt[2] * 2  # room for any JPEG of that size
         return self.bytesperline(n) * n.fmt[2]
 
     def ioctl(self, fd, request, arg):
@@ -157,7 +188,7 @@ class FakeD435(v4l2.Syscalls):
         self._fill_fmt(n, f)
 
     def _VIDIOC_S_FMT(self, n, f):
-        if self.streaming:
+        if n.streaming:
             raise _err(errno.EBUSY)
         code = v4l2.fourcc_str(f.fmt.pix.pixelformat)
         if code not in n.modes:  # uvcvideo falls back to the first format
@@ -229,48 +260,54 @@ class FakeD435(v4l2.Syscalls):
         C.memmove(q.data, int(v).to_bytes(size, "little"), size)
 
     def _VIDIOC_REQBUFS(self, n, r):
-        if self.streaming:
+        if n.streaming:
             raise _err(errno.EBUSY)
         assert r.memory == v4l2.MEMORY_MMAP and r.type == v4l2.BUF_TYPE_VIDEO_CAPTURE
         r.count = min(r.count, 8)
-        self.buffers, self.queued = [None] * r.count, []
+        n.buffers, n.queued = [None] * r.count, []
 
     def _VIDIOC_QUERYBUF(self, n, b):
-        if b.index >= len(self.buffers):
+        if b.index >= len(n.buffers):
             raise _err(errno.EINVAL)
         b.length, b.m.offset = self.sizeimage(n), b.index * 0x100000
 
     def _VIDIOC_QBUF(self, n, b):
-        if b.index >= len(self.buffers) or b.index in self.queued or self.buffers[b.index] is None:
+        if b.index >= len(n.buffers) or b.index in n.queued or n.buffers[b.index] is None:
             raise _err(errno.EINVAL)
-        self.queued.append(b.index)
+        n.queued.append(b.index)
 
     def _VIDIOC_STREAMON(self, n, t):
-        assert t.value == v4l2.BUF_TYPE_VIDEO_CAPTURE and self.queued
-        self.streaming = True
+        assert t.value == v4l2.BUF_TYPE_VIDEO_CAPTURE and n.queued
+        n.streaming = True
 
     def _VIDIOC_STREAMOFF(self, n, t):
-        self.streaming = False
-        self.queued = []
+        n.streaming = False
+        n.queued = []
 
     def _VIDIOC_DQBUF(self, n, b):
-        if not self.streaming or not self.queued:
+        if not n.streaming or not n.queued:
             raise _err(errno.EAGAIN)
-        while self.made in self.drop:  # the driver had no buffer in time: the frame is lost
-            self.made += 1
-        k = self.made
-        self.made += 1
-        i = self.queued.pop(0)
+        while n.made in self.drop:  # the driver had no buffer in time: the frame is lost
+            n.made += 1
+        k = n.made
+        n.made += 1
+        t = self.frame_time(n, k)
+        self.now = max(self.now, t)  # (waited for it)
+        i = n.queued.pop(0)
         code, w, h = n.fmt
-        img = self.frames(k, w, h, code)
+        img = (n.frames or self.frames)(k, w, h, code)
         bpl = self.bytesperline(n)
-        raw = np.zeros((h, bpl), np.uint8)
-        row = img.view(np.uint8).reshape(h, -1)
-        raw[:, : row.shape[1]] = row
-        self.buffers[i][: raw.nbytes] = raw.tobytes()
+        if code == "MJPG":
+            raw = np.asarray(img, np.uint8).reshape(-1)
+        else:
+            raw = np.zeros((h, bpl), np.uint8)
+            row = img.view(np.uint8).reshape(h, -1)
+            raw[:, : row.shape[1]] = row
+        n.buffers[i][: raw.nbytes] = raw.tobytes()
         b.index, b.bytesused, b.sequence = i, raw.nbytes, k
         b.flags = v4l2.BUF_FLAG_ERROR if k in self.corrupt else 0
-        b.timestamp.tv_sec, b.timestamp.tv_usec = 1000 + k // 25, (k % 25) * 40000
+        us = int(round(t * 1e6))
+        b.timestamp.tv_sec, b.timestamp.tv_usec = 1000 + us // 1000000, us % 1000000
 
 
 def ramp(k, w, h, code):
@@ -332,7 +369,7 @@ def test_format_negotiation():
     with v4l2.Device("/dev/video2", fake) as dev:
         cap = dev.querycap()
         assert cap.driver == "uvcvideo" and cap.is_video_capture and cap.can_stream
-        assert [f.fourcc for f in dev.formats()] == ["GREY", "Y8I ", "Y16 "]
+        assert [f.fourcc for f in dev.formats()] == ["GREY", "Y8I ", "Y16 ", "Y12I"]
         assert dev.frame_sizes("Y16") == [(1280, 800), (640, 400)]
         assert dev.frame_rates("Y16", 1280, 800) == [25.0, 15.0]
         fmt = dev.set_format(1280, 800, "Y16")
@@ -397,8 +434,8 @@ def test_emitter_falls_back_to_laser_power():
 
 def test_source_controls_stop_with_a_reason():
     fake = FakeD435(ramp)
-    with pytest.raises(CaptureError, match="'YUYV' is not a grey format"):  # colour: not read, by design
-        V4L2Source("/dev/video4", fourcc="YUYV", size=(1920, 1080), fps=30, camera="generic", sys=fake)
+    with pytest.raises(CaptureError, match="'NV12' is not a format this tool reads"):
+        V4L2Source("/dev/video4", fourcc="NV12", size=(1920, 1080), fps=30, camera="generic", sys=fake)
     assert fake.fds == {}
     gen = V4L2Source("/dev/video2", camera="generic", sys=fake)
     with pytest.raises(ControlError, match="exposure_auto / exposure_time_absolute"):
@@ -464,7 +501,7 @@ def test_read_times_out_with_a_reason():
     with v4l2.Device("/dev/video2", fake) as dev:
         dev.set_format(640, 400, "Y16")
         dev.start()
-        fake.queued.clear()  # the camera stopped delivering
+        fake.nodes["/dev/video2"].queued.clear()  # the camera stopped delivering
         with pytest.raises(v4l2.V4L2Error, match="no frame within 0.1 s"):
             dev.read(timeout=0.1)
 
@@ -518,6 +555,8 @@ def test_describe_nodes_for_the_first_contact(sysfs, capsys):
     out = capsys.readouterr().out
     assert "/dev/video2" in out and "Y16   1280x800@25/15" in out and "GREY" in out and "(rectified)" in out
     assert "extension unit exposure_us = 8500" in out and "not a video-capture node" in out
+    assert "Y12I  1280x800@25/15 640x400@25/15  (left + right, unrectified: --stereo)" in out
+    assert "YUYV  1920x1080@30 424x240@30/15" in out and "MJPG  424x240@30" in out  # the RGB node
 
 
 # ---- rotstar-capture through the fake device -------------------------------------------------

@@ -18,6 +18,9 @@ Modules, one concept each:
     d435               the D435 preset: find the IR node by USB id and
                        formats, Y16 1280x800 by default, exposure in us and
                        the emitter through the extension unit
+    interleaved        the D4xx stereo formats: Y12I / Y8I -> left and right
+                       images (the Y12I bit layout is one named switch)
+    colour             a colour node's frames (YUYV, UYVY, MJPG) as grey
     source             FrameSource (what a backend is), Frame, record()
     backend_v4l2       a V4L2 node as a FrameSource (the default backend)
     backend_libcamera  libcamera's `cam` tool as a FrameSource (experimental)
@@ -26,6 +29,10 @@ Modules, one concept each:
     backends           open a backend by name
     motion             frame differences, stillness, affine drift
     segment            a recording of the looping player -> its frames
+    rig                several cameras read in lockstep (RigSource, record_rig)
+    rig_segment        every camera's recording split with the same frame
+                       boundaries, checked on each camera
+    rig_session        a pose of several cameras -> <pose>/camera-<k>/ folders
     pose               one pose: segmented frames -> dataset folder, quick check
     coverage           which parts of the imager the detected corners cover
     simulated          simulated recordings of the player, for tests

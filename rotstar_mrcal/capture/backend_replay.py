@@ -21,7 +21,9 @@ Inputs, by what the path is:
                      "fps": ..., "t_ns": [...]} (what rotstar-capture --keep-raw
                      writes)
     NAME.raw         raw frames back to back, as `v4l2-ctl --stream-to` writes
-                     them: needs size and fourcc (GREY, Y16, Y8I)
+                     them: needs size and fourcc (GREY, Y16, Y8I); a dump of
+                     both imagers (Y12I, or Y8I as a pair) is split by
+                     stereo_raw() into the left and the right recording
     anything else    a video file through OpenCV (8-bit only, and usually
                      lossy: prefer frames or .npy)
 
@@ -38,6 +40,7 @@ import re
 import cv2
 import numpy as np
 
+from .interleaved import BYTES_PER_PIXEL, InterleavedError, unpack
 from .source import CaptureError, Frame, FrameSource
 from .v4l2 import PIXEL_FORMATS
 
@@ -213,4 +216,64 @@ class _LazyFrames:
         return self.src.n
 
     def __getitem__(self, i: int) -> np.ndarray:
-        return self.src._image(int(i))
+        img = self.src._image(int(i))
+        if img.shape != self.shape[1:]:
+            raise CaptureError(f"{self.src.files[int(i)]}: {img.shape[1]}x{img.shape[0]}, the recording's first "
+                               f"frame is {self.shape[2]}x{self.shape[1]} (every frame of a camera has one size)")
+        return img
+
+    def check_sizes(self) -> None:
+        """Read every frame once: CaptureError naming the first whose size differs from the first frame's"""
+        for i in range(len(self)):
+            self[i]
+
+
+class InterleavedFrames:
+    """One imager of a raw dump of both (Y12I / Y8I), unpacked frame by frame on demand (indexable like an array)"""
+
+    def __init__(self, raw: np.ndarray, code: str, width: int, height: int, view: int):
+        self.raw, self.code, self.view = raw, code, view
+        self.width, self.height = width, height
+        self.dtype = np.dtype(np.uint16 if code == "Y12I" else np.uint8)
+        self.shape = (len(raw), height, width)
+
+    def __len__(self) -> int:
+        return len(self.raw)
+
+    def __getitem__(self, t: int) -> np.ndarray:
+        return unpack(self.code, self.raw[int(t)], self.width, self.height)[self.view]
+
+
+def stereo_raw(path: str, size: tuple[int, int], fourcc: str) -> list[InterleavedFrames]:
+    """A raw dump of both imagers (`v4l2-ctl --stream-to` in Y12I or Y8I) -> [left, right] recordings
+
+    SYNOPSIS
+
+        >>> import tempfile, os
+        >>> from rotstar_mrcal.capture.interleaved import pack_y12i
+        >>> fn = os.path.join(tempfile.mkdtemp(), "pair.raw")
+        >>> l, r = np.full((2, 3), 7, np.uint16), np.full((2, 3), 9, np.uint16)
+        >>> with open(fn, "wb") as f:
+        ...     _ = f.write(pack_y12i(l, r).tobytes() * 4)           # 4 frames of 3x2
+        >>> left, right = stereo_raw(fn, (3, 2), "Y12I")
+        >>> len(left), left.shape, int(left[3][1, 2]), int(right[0][0, 0])
+        (4, (4, 2, 3), 7, 9)
+    """
+    code = (fourcc + "    ")[:4]
+    if code not in BYTES_PER_PIXEL:
+        raise CaptureError(f"{path}: {fourcc} is not a format of both imagers (Y12I, Y8I)")
+    w, h = size
+    per = w * h * BYTES_PER_PIXEL[code]
+    try:
+        raw = np.memmap(path, np.uint8, mode="r")
+    except (OSError, ValueError) as e:
+        raise CaptureError(f"{path}: cannot read ({e})") from None
+    if len(raw) == 0 or len(raw) % per:
+        raise CaptureError(f"{path}: {raw.nbytes} bytes is not a whole number of {w}x{h} {code.strip()} frames "
+                           f"({per} bytes each)")
+    frames = raw.reshape(-1, per)
+    try:
+        unpack(code, frames[0], w, h)
+    except InterleavedError as e:
+        raise CaptureError(f"{path}: {e}") from None
+    return [InterleavedFrames(frames, code, w, h, v) for v in (0, 1)]

@@ -15,14 +15,28 @@ through the vendor extension unit (d435.py); camera "generic" uses the
 standard UVC controls (exposure_auto = manual, exposure_time_absolute in 100
 us units) and has no emitter. Gain is V4L2's gain control for both. Every
 control is read back; a mismatch raises ControlError.
+
+Formats: the grey ones of v4l2.PIXEL_FORMATS give one view, as recorded.
+stereo=True (the D4xx's Y12I, or Y8I) gives two views per buffer, the left
+and the right imager (interleaved.py), read_views() -> [left, right]; read()
+is the left one. A colour format (YUYV, UYVY, MJPG: the D435's RGB node)
+gives its luma as a uint8 grey view (colour.py).
+
+    ir = V4L2Source("/dev/video2", fourcc="Y12I", stereo=True)   # 1280x800 25 fps
+    left, right = ir.read_views()                                # Frames, uint16 12-bit values
+    rgb = V4L2Source("/dev/video4", fourcc="YUYV", size=(1280, 720), fps=30, camera="generic")
 """
 
 from __future__ import annotations
 
 from . import d435
+from .colour import COLOUR_FORMATS, ColourError, to_grey
+from .interleaved import InterleavedError, unpack
 from .source import CaptureError, ControlError, Frame, FrameSource
 from .v4l2 import (CID_EXPOSURE_ABSOLUTE, CID_EXPOSURE_AUTO, CID_GAIN, EXPOSURE_MANUAL, PIXEL_FORMATS, Device,
                    Syscalls, V4L2Error)
+
+STEREO_FORMATS = ("Y12I", "Y8I ")
 
 CAMERAS = ("d435", "generic")
 
@@ -32,7 +46,7 @@ class V4L2Source(FrameSource):
 
     def __init__(self, path: str, fourcc: str = d435.DEFAULT_FOURCC, size=d435.DEFAULT_SIZE,
                  fps: float | None = d435.DEFAULT_FPS, camera: str = "d435", nbuffers: int = 4,
-                 sys: Syscalls | None = None):
+                 sys: Syscalls | None = None, stereo: bool = False):
         if camera not in CAMERAS:
             raise CaptureError(f"unknown camera {camera!r}; known: {', '.join(CAMERAS)}")
         self.camera = camera
@@ -48,9 +62,12 @@ class V4L2Source(FrameSource):
             self.card = cap.card
             fmts = [f.fourcc for f in self.dev.formats()]
             code = (fourcc + "    ")[:4]
-            if code not in PIXEL_FORMATS:
-                raise CaptureError(f"pixel format {code.strip()!r} is not a grey format this tool reads "
-                                   f"({', '.join(k.strip() for k in PIXEL_FORMATS)})")
+            if stereo and code not in STEREO_FORMATS:
+                raise CaptureError(f"{code.strip()} is not a stereo format (Y12I, Y8I)")
+            if code not in PIXEL_FORMATS and code not in STEREO_FORMATS + COLOUR_FORMATS:
+                known = [k.strip() for k in PIXEL_FORMATS] + [k.strip() for k in STEREO_FORMATS + COLOUR_FORMATS
+                                                               if k not in PIXEL_FORMATS]
+                raise CaptureError(f"pixel format {code.strip()!r} is not a format this tool reads ({', '.join(known)})")
             if code not in fmts:
                 raise CaptureError(f"{path} ({cap.card}) has no {code.strip()} format; it offers "
                                    f"{', '.join(f.strip() for f in fmts) or 'none'}")
@@ -66,9 +83,13 @@ class V4L2Source(FrameSource):
         except CaptureError:
             self.dev.close()
             raise
-        dtype = PIXEL_FORMATS[self.format.fourcc][0]
+        self.code = self.format.fourcc
+        self.views = 2 if stereo or self.code == "Y12I" else 1
+        self.dev.raw_bytes = self.views == 2  # (Y8I as both halves, not the left one)
+        dtype = PIXEL_FORMATS[self.code][0] if self.code in PIXEL_FORMATS else "u2" if self.code == "Y12I" else "u1"
         self.full_scale = 255.0 if dtype == "u1" else 65535.0
         self.path = path
+        self._last: list[Frame] | None = None
 
     # ---- streaming -----------------------------------------------------------------
     def start(self) -> None:
@@ -86,12 +107,35 @@ class V4L2Source(FrameSource):
     def close(self) -> None:
         self.dev.close()
 
-    def read(self, timeout: float = 2.0) -> Frame:
+    def read_views(self, timeout: float = 2.0) -> list[Frame]:
+        """The next buffer as its views: [image] or, stereo, [left, right]"""
         try:
             f = self.dev.read(timeout)
         except V4L2Error as e:
             raise CaptureError(str(e)) from None
-        return Frame(f.image, f.sequence, f.timestamp_ns)
+        w, h = self.format.width, self.format.height
+        try:
+            if self.views == 2:
+                images = unpack(self.code, f.image, w, h)
+            elif self.code in COLOUR_FORMATS:
+                images = [to_grey(self.code, f.image, w, h)]
+            else:
+                images = [f.image]
+        except (InterleavedError, ColourError) as e:
+            raise CaptureError(f"{self.path}: frame {f.sequence}: {e}") from None
+        self._last = [Frame(im, f.sequence, f.timestamp_ns) for im in images]
+        return self._last
+
+    def read(self, timeout: float = 2.0) -> Frame:
+        return self.read_views(timeout)[0]
+
+    def read_latest(self, timeout: float = 2.0) -> list[Frame]:
+        """The newest buffer waiting, the ones before it dropped; none waiting: the last one read again
+        (a slower camera held at its latest frame), or the next one if nothing was read yet"""
+        got = None
+        while self.dev.ready():
+            got = self.read_views(timeout)
+        return got or self._last or self.read_views(timeout)
 
     # ---- controls ------------------------------------------------------------------
     def set_exposure_us(self, us: float) -> float:

@@ -27,7 +27,7 @@ BACKENDS = ("v4l2", "libcamera", "realsense", "replay")
 def open_source(backend: str = "v4l2", device: str | None = None, camera: str = "d435",
                 fourcc: str = d435.DEFAULT_FOURCC, size=d435.DEFAULT_SIZE, fps: float | None = d435.DEFAULT_FPS,
                 serial: str | None = None, sys: Syscalls | None = None, sysfs: str = "/sys/class/video4linux",
-                dev_root: str = "/dev") -> FrameSource:
+                dev_root: str = "/dev", stereo: bool = False) -> FrameSource:
     """A FrameSource for the backend; see the module docstring"""
     if backend == "v4l2":
         from .backend_v4l2 import V4L2Source
@@ -36,7 +36,9 @@ def open_source(backend: str = "v4l2", device: str | None = None, camera: str = 
             if camera != "d435":
                 raise CaptureError("a generic V4L2 camera needs --device /dev/videoN")
             device = d435.find_ir_node(sysfs, dev_root, sys, serial).path
-        return V4L2Source(device, fourcc, size, fps, camera, sys=sys)
+        return V4L2Source(device, fourcc, size, fps, camera, sys=sys, stereo=stereo)
+    if stereo:
+        raise CaptureError(f"both infrared imagers are recorded over V4L2, not the {backend} backend")
     if backend == "libcamera":
         from .backend_libcamera import LibcameraSource
 

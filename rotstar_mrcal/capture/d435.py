@@ -17,10 +17,11 @@ kernels; /dev/video numbers depend on what else is plugged in. The IR node is
 the video-capture node of an Intel (8086) D4xx product whose format list
 holds Y16 or GREY.
 
-Formats: GREY / Y8I are rectified and undistorted by the camera's ASIC with
+Formats: GREY / Y8I (both imagers, 8-bit) are rectified and undistorted by the camera's ASIC with
 its factory calibration, so calibrating on them estimates a virtual, nearly
 distortion-free camera, not the lens. Y16 (1280x800 or 640x400, 15 or 25 fps)
-is the unrectified calibration stream: the default. Its real bit depth (10
+is the unrectified calibration stream: the default; Y12I is the same for
+both imagers, 12 bits each (interleaved.py). Its real bit depth (10
 bits, low- or high-aligned?) is not documented; rotstar-capture logs the
 value range it sees.
 
@@ -50,7 +51,7 @@ D4XX_PRODUCTS = {  # librealsense src/ds/d400/d400-private.h
 DEFAULT_FOURCC = "Y16 "
 DEFAULT_SIZE = (1280, 800)
 DEFAULT_FPS = 25.0
-IR_FORMATS = ("Y16 ", "GREY", "Y8I ")
+IR_FORMATS = ("Y16 ", "GREY", "Y8I ", "Y12I")
 EXPOSURE_RANGE_US = (1, 165000)
 
 
@@ -152,8 +153,8 @@ def format_warning(code: str) -> str | None:
     code = (code + "    ")[:4]
     if code in ("GREY", "Y8I "):
         return (f"{code.strip()} frames are rectified and undistorted by the camera with its factory "
-                f"calibration: a calibration on them describes that virtual camera, not the lens. "
-                f"Use Y16 (1280x800 or 640x400) to calibrate the imager")
+                f"calibration: a calibration on them describes that virtual camera, not the lens; a quick "
+                f"look only. Use Y16 (1280x800 or 640x400) to calibrate the imager, Y12I for both imagers")
     return None
 
 

@@ -55,8 +55,9 @@ class PoseOutcome:
 class OutputDataset:
     """One output dataset (one exposure): its folder, corners so far, value scale, display offsets"""
 
-    def __init__(self, folder: str, exposure: int | None):
+    def __init__(self, folder: str, exposure: int | None, camera: str | None = None):
         self.folder, self.exposure = folder, exposure
+        self.camera = camera  # a rig's camera-<k>: poses go to <pose>/<camera>, coverage to coverage-<camera>.png
         self.boards: list[np.ndarray] = []
         self.names: list[str] = []  # the pose of each board
         self.shifts: dict = {}  # pose -> FrameShifts
@@ -70,8 +71,16 @@ class OutputDataset:
         return f"{self.exposure} us" if self.exposure else ""
 
     def what(self, pose: str) -> str:
-        """'pose003' or 'pose003 at 4000 us', for messages"""
-        return f"{pose} at {self.label}" if self.exposure else pose
+        """'pose003' or 'pose003 at 4000 us', for messages (with the camera of a rig)"""
+        return (f"{pose} at {self.label}" if self.exposure else pose) + (f" {self.camera}" if self.camera else "")
+
+    def pose_folder(self, pose: str) -> str:
+        """The pose folder's name inside the dataset: <pose>, or <pose>/camera-<k> for a rig's camera"""
+        return f"{pose}/{self.camera}" if self.camera else pose
+
+    @property
+    def coverage_file(self) -> str:
+        return os.path.join(self.folder, f"coverage-{self.camera}.png" if self.camera else "coverage.png")
 
     @property
     def display(self) -> DisplayCheck:
@@ -183,6 +192,12 @@ def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frame
         ds.tau = threshold(d, so.k, so.ratio)  # as segment() would have set it
         entry.update(ok=False, error=str(e))
         return PoseOutcome(False, [f"{ds.what(pose)}: not usable: {e}"])
+    return process_segmented(ds, pose, pattern, layout, seg, frames.shape, full_scale, entry)
+
+
+def process_segmented(ds: OutputDataset, pose: str, pattern: dict, layout, seg, shape: tuple, full_scale: float,
+                      entry: dict) -> PoseOutcome:
+    """Check and write one segmented recording into ds (value scale, quick detection, coverage)"""
     messages = []
     if ds.scale is None:
         ds.scale, note = value_scale(max(float(np.max(im)) for im in seg.images.values()), full_scale)
@@ -192,17 +207,17 @@ def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frame
     total = layout.nx * layout.ny
     entry.update(summary=seg.summary(), drift_px=seg.loop.motion_px, found=r.found, corners=r.n_valid,
                  error=r.error)
+    extra = {"exposure_us": ds.exposure, "dropped_camera_frames": entry["dropped"],
+             "quick_check": {"corners": r.n_valid, "motion_px": r.motion_px}}
     if not r.found:
-        entry["ok"] = False
+        entry.update(ok=False, extra=extra)
         return PoseOutcome(False, messages + [f"{ds.what(pose)}: no board: {r.error}"])
-    folder = write_segmented(ds.folder, pose, seg, pattern, full_scale, ds.scale,
-                             {"exposure_us": ds.exposure, "dropped_camera_frames": entry["dropped"],
-                              "quick_check": {"corners": r.n_valid, "motion_px": r.motion_px}})
+    folder = write_segmented(ds.folder, ds.pose_folder(pose), seg, pattern, full_scale, ds.scale, extra)
     ds.boards.append(r.corners)
     ds.names.append(pose)
-    ds.imagersize = (frames.shape[2], frames.shape[1])
+    ds.imagersize = (shape[2], shape[1])
     counts = coverage.coverage_counts(ds.boards, ds.imagersize)
-    with atomic_path(os.path.join(ds.folder, "coverage.png")) as tmp:
+    with atomic_path(ds.coverage_file) as tmp:
         cv2.imwrite(tmp, coverage.coverage_image(ds.boards, ds.imagersize, names=ds.names))
     if r.shifts is not None:
         ds.shifts[pose] = r.shifts

@@ -16,7 +16,11 @@ sizes and frame rates, format negotiation, the simple controls
 (VIDIOC_QUERYCTRL / G_CTRL / S_CTRL and menus), and memory-mapped streaming
 that returns each frame as a numpy array in the device's own units (GREY ->
 uint8, Y16 -> uint16, Y8I -> the left imager's uint8; no colour conversion,
-no scaling). Vendor extension-unit controls are in uvc_xu.py.
+no scaling). Packed formats (PACKED_FORMATS: Y12I, the D4xx's two 12-bit
+imagers in 3 bytes; YUYV, UYVY) come as their bytes, (height, width *
+bytes a pixel) uint8, compressed ones (MJPG) as the buffer's bytes: the
+stereo split is interleaved.py's, the colour conversion colour.py's.
+Vendor extension-unit controls are in uvc_xu.py.
 
 All system calls go through a Syscalls object (open, close, ioctl, mmap,
 select), so tests replace the kernel with a fake device at exactly this
@@ -106,6 +110,30 @@ PIXEL_FORMATS = {
     "Y8I ": ("u1", 2, "8-bit left + right interleaved (D4xx, rectified); the left is kept"),
     "Z16 ": ("<u2", 1, "16-bit depth (not an image to calibrate from)"),
 }
+PACKED_FORMATS = {
+    # fourcc: (bytes a pixel, description); read as raw bytes, converted by the backend
+    "Y12I": (3, "12-bit left + right packed in 3 bytes (D4xx, unrectified calibration stream)"),
+    "YUYV": (2, "colour, 4:2:2 Y U Y V"),
+    "UYVY": (2, "colour, 4:2:2 U Y V Y"),
+}
+COMPRESSED_FORMATS = {"MJPG": "colour, motion JPEG"}
+
+
+def bytes_per_pixel(code: str) -> int:
+    """Bytes a pixel of a fourcc this layer reads (0 for compressed formats)
+
+    SYNOPSIS
+
+        >>> bytes_per_pixel("Y16"), bytes_per_pixel("Y8I"), bytes_per_pixel("Y12I"), bytes_per_pixel("MJPG")
+        (2, 2, 3, 0)
+    """
+    code = (code + "    ")[:4]
+    if code in PIXEL_FORMATS:
+        dt, spp, _ = PIXEL_FORMATS[code]
+        return spp * np.dtype(dt).itemsize
+    if code in PACKED_FORMATS:
+        return PACKED_FORMATS[code][0]
+    return 0
 
 
 # ---- structures (<linux/videodev2.h>, 64-bit) --------------------------------
@@ -343,7 +371,7 @@ class Control:
 
 @dataclasses.dataclass
 class RawFrame:
-    image: np.ndarray  # (H, W) uint8 or uint16, a copy
+    image: np.ndarray  # (H, W) uint8 or uint16, a copy; packed: (H, W * bytes) uint8; compressed: (n,) uint8
     sequence: int  # the driver's frame counter: gaps are dropped frames
     timestamp_ns: int  # driver time stamp (uvcvideo: CLOCK_MONOTONIC)
     flags: int
@@ -376,6 +404,33 @@ def frame_array(data, fmt: PixFormat, bytesused: int | None = None) -> np.ndarra
     return np.ascontiguousarray(img)
 
 
+def frame_bytes(data, fmt: PixFormat, bytesused: int | None = None) -> np.ndarray:
+    """The bytes of one buffer of a packed format, (height, width * bytes a pixel) uint8, copied;
+    of a compressed format, (bytesused,) uint8
+
+    SYNOPSIS
+
+        >>> frame_bytes(bytes(range(14)), PixFormat(2, 2, "Y12I", 7, 14)).tolist()   # 1 byte of padding a line
+        [[0, 1, 2, 3, 4, 5], [7, 8, 9, 10, 11, 12]]
+    """
+    n = len(data) if bytesused is None else min(bytesused, len(data))
+    if fmt.fourcc in COMPRESSED_FORMATS:
+        if n == 0:
+            raise V4L2Error(f"empty {fmt.fourcc.strip()} frame")
+        return np.frombuffer(data, np.uint8, count=n).copy()
+    if not bytes_per_pixel(fmt.fourcc):
+        raise V4L2Error(f"pixel format {fmt.fourcc!r} is not supported here")
+    row = fmt.width * bytes_per_pixel(fmt.fourcc)
+    bpl = fmt.bytesperline or row
+    need = bpl * (fmt.height - 1) + row
+    if n < need:
+        raise V4L2Error(f"short frame: {n} bytes, a {fmt.width}x{fmt.height} {fmt.fourcc.strip()} image needs {need}")
+    buf = np.frombuffer(data, np.uint8, count=min(n, bpl * fmt.height))
+    if len(buf) < bpl * fmt.height:
+        buf = np.concatenate([buf, np.zeros(bpl * fmt.height - len(buf), np.uint8)])
+    return buf.reshape(fmt.height, bpl)[:, :row].copy()
+
+
 # ---- the device -----------------------------------------------------------------
 class Device:
     """One V4L2 video node; see the module docstring"""
@@ -389,6 +444,7 @@ class Device:
             raise V4L2Error(f"{path}: cannot open ({e.strerror}); is the camera plugged in, and may this user "
                             f"open it (group 'video')?") from None
         self.format: PixFormat | None = None
+        self.raw_bytes = False  # read() returns every format's bytes (frame_bytes): both halves of Y8I
         self._buffers: list = []
         self._requested = False
         self._streaming = False
@@ -498,9 +554,8 @@ class Device:
             have = ", ".join(f"{k.strip()} " + " ".join(f"{w}x{h}" for w, h, _ in v) for k, v in self.modes().items())
             raise V4L2Error(f"{self.path}: asked for {width}x{height} {code.strip()}, the driver chose "
                             f"{got.width}x{got.height} {got.fourcc.strip()}; this node offers: {have or 'nothing'}")
-        if got.bytesperline == 0:
-            got = dataclasses.replace(got, bytesperline=width * PIXEL_FORMATS.get(code, ("u1", 1))[1]
-                                      * np.dtype(PIXEL_FORMATS.get(code, ("u1", 1))[0]).itemsize)
+        if got.bytesperline == 0 and code not in COMPRESSED_FORMATS:
+            got = dataclasses.replace(got, bytesperline=width * (bytes_per_pixel(code) or 1))
         self.format = got
         return got
 
@@ -595,11 +650,16 @@ class Device:
             try:
                 if b.flags & BUF_FLAG_ERROR:
                     continue
-                img = frame_array(self._buffers[b.index], self.format, b.bytesused)
+                as_array = self.format.fourcc in PIXEL_FORMATS and not self.raw_bytes
+                img = (frame_array if as_array else frame_bytes)(self._buffers[b.index], self.format, b.bytesused)
             finally:
                 self._queue(b.index)
             t = b.timestamp.tv_sec * 1_000_000_000 + b.timestamp.tv_usec * 1000
             return RawFrame(img, int(b.sequence), int(t), int(b.flags))
+
+    def ready(self) -> bool:
+        """A frame is waiting (select without waiting): read() would not block"""
+        return self._streaming and self.sys.select(self.fd, 0.0)
 
     def stop(self) -> None:
         if self._streaming:

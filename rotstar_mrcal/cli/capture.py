@@ -14,6 +14,8 @@ import numpy as np
 from .. import dataset
 from ..capture.backends import BACKENDS, describe_nodes, open_source
 from ..capture.d435 import DEFAULT_FPS, DEFAULT_FOURCC, DEFAULT_SIZE, format_warning
+from ..capture.rig import RigSource
+from ..capture.rig_session import RigDataset, capture_rig_one
 from ..capture.session import OutputDataset, SessionOptions, capture_one, next_free_pose, wait_for_new_view
 from ..capture.source import CaptureError, ControlError, FrameSource, skip
 from ..display.loop import player_loop
@@ -41,6 +43,19 @@ unsuitable for calibrating the lens), auto exposure off, the exposure in
 microseconds and the IR projector off through the camera's extension unit,
 gain 16. A control that cannot be set stops the capture (unless --force).
 
+Both infrared imagers (--stereo): the D435's interleaved calibration
+stream Y12I (left and right, 12 bits each, unrectified, 1280x800 at 25 fps
+by default), split into camera-0 (left) and camera-1 (right) with the same
+exposure, gain and emitter settings; --stereo-format Y8I is the camera's
+rectified 8-bit pair, for a quick look only (not for calibrating the
+lenses). --rgb-device /dev/videoN adds the colour camera (its own node,
+format and size; its luma is recorded as grey) as the next camera. The
+cameras are read in lockstep (the colour camera is not hardware-
+synchronised with the infrared pair: at each infrared frame its newest
+frame is taken), every camera's recording is split with the same frame
+boundaries, and each pose becomes OUT/poseNNN/camera-<k>/ folders (the
+multi-camera layout of doc/dataset.md), with a coverage picture per camera.
+
 Several exposures (--exposure 2000,4000,8000) give one dataset each,
 OUT/exp2000us, OUT/exp4000us, ..., to calibrate and compare separately.
 Without --exposure the camera's exposure is left alone and OUT is the
@@ -56,6 +71,8 @@ examples:
   rotstar-capture --pattern pattern/ --out seq --exposure 2000,4000,8000
   rotstar-capture --pattern pattern/ --out seq --auto --poses 30
   rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --frames 640
+  rotstar-capture --pattern pattern/ --out stereo --stereo --exposure 4000          # both IR imagers
+  rotstar-capture --pattern pattern/ --out rig --stereo --rgb-device /dev/video4 --rgb-exposure 300
   rotstar-detect seq/exp4000us > corners.vnl
 
 """ + EXIT_CODES_HELP + " (a camera that cannot be opened or set: 1)\n"
@@ -77,6 +94,10 @@ def parse_args(argv=None):
     p.add_argument("--list", action="store_true",
                    help="list every video node (USB id, formats, sizes, frame rates, controls, D4xx "
                         "extension-unit values) on stdout and exit")
+    p.add_argument("--snapshot", metavar="DIR",
+                   help="first contact: set the controls, drop --settle frames, write one frame of every camera as "
+                        "DIR/camera-<k>.png (as recorded) and print each one's mean and maximum, then exit (with "
+                        "--stereo: cover one lens to see which camera goes dark)")
     p.add_argument("--pattern", help="the pattern folder (or its pattern.json) that player.html shows")
     p.add_argument("--out", "-o", help="dataset folder (one sub-folder per exposure with --exposure)")
     g = p.add_argument_group("camera")
@@ -97,6 +118,22 @@ def parse_args(argv=None):
     g.add_argument("--settle", type=int, default=8,
                    help="frames dropped after a change of exposure or a pause (default 8)")
     g.add_argument("--force", action="store_true", help="go on when a control cannot be set")
+    s = p.add_argument_group("several cameras (D435: both infrared imagers, the colour camera)")
+    s.add_argument("--stereo", action="store_true",
+                   help="record the left and the right infrared imager (cameras 0 and 1) from the interleaved "
+                        "stream of the IR node (default Y12I 1280x800 at 25 fps, unrectified)")
+    s.add_argument("--stereo-format", choices=("Y12I", "Y8I"), default="Y12I",
+                   help="Y12I: unrectified 12-bit, for calibration (default); Y8I: rectified by the camera, a quick "
+                        "look only")
+    s.add_argument("--rgb-device", help="also record this colour node (e.g. the D435's RGB camera, /dev/videoN of "
+                                        "its USB interface 3; see --list) as the next camera, converted to grey")
+    s.add_argument("--rgb-format", choices=("YUYV", "UYVY", "MJPG"), default="YUYV",
+                   help="the colour node's format (default YUYV: its luma is the grey image; MJPG is lossy)")
+    s.add_argument("--rgb-size", type=size_arg, default=(1280, 720), help="the colour node's size (default 1280x720)")
+    s.add_argument("--rgb-fps", type=float, default=30.0, help="the colour node's frame rate (default 30)")
+    s.add_argument("--rgb-exposure", type=float,
+                   help="the colour camera's manual exposure, microseconds (standard UVC controls, 100 us steps); "
+                        "default: left alone (its auto exposure will follow the sequence's black marker: set it)")
     r = p.add_argument_group("recording")
     r.add_argument("--frames", type=int, help="camera frames per recording (default: --loops loops of the player)")
     r.add_argument("--loops", type=float, default=2.2, help="player loops per recording (default 2.2: at least one "
@@ -110,10 +147,13 @@ def parse_args(argv=None):
     r.add_argument("--keep-raw", action="store_true", help="keep every recording as OUT/raw/<pose>_<exposure>.npy (+ .json)")
     add_segment_options(p)
     a = p.parse_args(argv)
-    if not a.list and (not a.pattern or not a.out):
-        p.error("--pattern and --out are needed (or --list)")
+    if not a.list and not a.snapshot and (not a.pattern or not a.out):
+        p.error("--pattern and --out are needed (or --list, --snapshot)")
     if a.backend == "replay" and a.exposure:
         p.error("a replay has the exposure it was recorded with: drop --exposure")
+    if (a.stereo or a.rgb_device) and a.backend != "v4l2":
+        p.error("--stereo and --rgb-device record over V4L2 (--backend v4l2); split recordings of several cameras "
+                "with rotstar-segment")
     return a
 
 
@@ -134,7 +174,9 @@ def print_nodes(nodes: list[dict]) -> None:
             continue
         for fmt, modes in n.get("modes", {}).items():
             warn = format_warning(fmt) if n.get("xu") else None
-            print(f"  {fmt:5s} {' '.join(modes)}" + ("  (rectified)" if warn else ""))
+            label = "  (rectified)" if warn else "  (left + right, unrectified: --stereo)" \
+                if fmt == "Y12I" and n.get("xu") else ""
+            print(f"  {fmt:5s} {' '.join(modes)}{label}")
         for name, v in n.get("controls", {}).items():
             print(f"  control {name} = {v}")
         for name, v in n.get("xu", {}).items():
@@ -142,6 +184,18 @@ def print_nodes(nodes: list[dict]) -> None:
 
 
 # ---- the session ------------------------------------------------------------------------
+def camera_names(rig: RigSource) -> list[str]:
+    """What each camera of a rig is, for the log: 'left IR (Y12I 1280x800)', ..."""
+    out = []
+    for s in rig.sources:
+        fmt = getattr(s, "format", None)
+        what = f"{fmt.fourcc.strip()} {fmt.width}x{fmt.height}" if fmt else s.name
+        where = getattr(s, "path", "")
+        out += ([f"left IR ({where} {what})", f"right IR ({where} {what})"] if getattr(s, "views", 1) == 2
+                else [f"{where} ({what})"])
+    return out
+
+
 def frames_per_recording(a, n_entries: int, fps: float) -> int:
     if a.frames:
         return a.frames
@@ -169,6 +223,49 @@ def control(a, what: str, f, *args):
         return False
 
 
+def open_rig(a, fps) -> FrameSource:
+    """The infrared node (both imagers with --stereo) and the colour node, as one RigSource"""
+    fourcc = a.stereo_format if a.stereo else a.fourcc
+    ir = open_source("v4l2", a.device, a.camera, fourcc, a.size, fps, a.serial, stereo=a.stereo)
+    sources = [ir]
+    try:
+        if a.rgb_device:
+            rgb = open_source("v4l2", a.rgb_device, "generic", a.rgb_format, a.rgb_size, a.rgb_fps)
+            sources.append(rgb)
+            if a.rgb_exposure:
+                control(a, f"colour exposure {a.rgb_exposure:g} us", rgb.set_exposure_us, a.rgb_exposure)
+    except CaptureError:
+        for s in sources:
+            s.close()
+        raise
+    return RigSource(sources)
+
+
+def snapshot(a, src: FrameSource, names: list[str]) -> int:
+    """--snapshot: one frame per camera to DIR, and their levels on stdout"""
+    import cv2
+
+    os.makedirs(a.snapshot, exist_ok=True)
+    gain, emitter = default_controls(a)
+    if emitter != "keep":
+        control(a, f"emitter {emitter}", src.set_emitter, emitter == "on")
+    if gain is not None:
+        control(a, f"gain {gain:g}", src.set_gain, gain)
+    if a.exposure:
+        control(a, f"exposure {a.exposure[0]} us", src.set_exposure_us, a.exposure[0])
+    src.start()
+    skip(src, a.settle)
+    views = src.read_views() if isinstance(src, RigSource) else [src.read()]
+    if views is None or views[0] is None:
+        raise CaptureError("no frame")
+    for k, (f, name) in enumerate(zip(views, names)):
+        fn = os.path.join(a.snapshot, f"camera-{k}.png")
+        cv2.imwrite(fn, f.image)
+        print(f"camera-{k} {name}: {fn}, mean {float(f.image.mean()):.1f}, max {int(f.image.max())} "
+              f"({f.image.dtype}), frame {f.sequence}")
+    return 0
+
+
 def main(argv=None, source: FrameSource | None = None) -> int:
     return run("rotstar-capture", lambda argv: _main(argv, source), argv)
 
@@ -178,22 +275,50 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
     if a.list:
         print_nodes(describe_nodes())
         return 0
+    if a.snapshot:
+        fps = a.fps or DEFAULT_FPS
+        try:
+            src = source or (open_rig(a, fps) if a.stereo or a.rgb_device else
+                             open_source(a.backend, a.device, a.camera, a.fourcc, a.size, fps, a.serial))
+        except CaptureError as e:
+            fail(str(e), EXIT_FAILED)
+        try:
+            return snapshot(a, src, camera_names(src) if isinstance(src, RigSource) else [getattr(src, "path", "")])
+        except CaptureError as e:
+            say(f"rotstar-capture: {e}")
+            return EXIT_FAILED
+        finally:
+            try:
+                src.stop()
+            finally:
+                src.close()
     try:
         pattern, layout = dataset.read_pattern(a.pattern)
     except dataset.DatasetError as e:
         fail(str(e))
     check_output_path(a.out, [dataset.pattern_file(a.pattern)], folder=True)
     n_entries = len(player_loop(pattern["frames"]))
-    warn = format_warning(a.fourcc) if a.camera == "d435" and a.backend != "replay" else None
+    ir_format = a.stereo_format if a.stereo else a.fourcc
+    warn = format_warning(ir_format) if a.camera == "d435" and a.backend != "replay" else None
     if warn:
         say(f"rotstar-capture: warning: {warn}")
+    if not a.rgb_exposure and a.rgb_device:
+        say("rotstar-capture: warning: the colour camera's exposure is left alone (--rgb-exposure sets it): "
+            "auto exposure changes the brightness between the player's frames")
     fps = a.fps if a.fps else (None if a.backend == "replay" else DEFAULT_FPS)
     try:
-        src = source or open_source(a.backend, a.device, a.camera, a.fourcc, a.size, fps, a.serial)
+        src = source or (open_rig(a, fps) if a.stereo or a.rgb_device else
+                         open_source(a.backend, a.device, a.camera, a.fourcc, a.size, fps, a.serial))
     except CaptureError as e:
         fail(str(e), EXIT_FAILED)
-    datasets = ([OutputDataset(os.path.join(a.out, f"exp{e}us"), e) for e in a.exposure] if a.exposure
-                else [OutputDataset(a.out, None)])
+    rig = isinstance(src, RigSource)
+    exposures = a.exposure or [None]
+    folders = [os.path.join(a.out, f"exp{e}us") if e else a.out for e in exposures]
+    datasets = [RigDataset(f, e, src.cameras) if rig else OutputDataset(f, e) for f, e in zip(folders, exposures)]
+    grab = capture_rig_one if rig else capture_one
+    if rig:
+        say(f"rotstar-capture: {src.cameras} cameras: " + ", ".join(
+            f"camera-{k} {v}" for k, v in enumerate(camera_names(src))))
     opts = SessionOptions(options_from(a), a.keep_raw)
     raw_dir = os.path.join(a.out, "raw")
     interrupted = False
@@ -236,7 +361,7 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
                     if ds.exposure:
                         control(a, f"exposure {ds.exposure} us", src.set_exposure_us, ds.exposure)
                         skip(src, a.settle)
-                    out = capture_one(src, ds, pose, pattern, layout, nframes, raw_dir, opts)
+                    out = grab(src, ds, pose, pattern, layout, nframes, raw_dir, opts)
                     for m in out.messages:
                         say(f"rotstar-capture: {m}")
                     if out.folder:
@@ -267,7 +392,8 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
         if not a.keep_raw and os.path.isdir(raw_dir):
             shutil.rmtree(raw_dir, ignore_errors=True)
     for ds in datasets:
-        say(f"rotstar-capture: {ds.folder}: {ds.good} pose(s) with a board; next: rotstar-detect {ds.folder} > corners.vnl")
+        say(f"rotstar-capture: {ds.folder}: {ds.good} pose(s) with a board; next: rotstar-detect {ds.folder} > corners.vnl"
+            + (" (the multi-camera layout: doc/dataset.md)" if rig else ""))
     if interrupted:
         return EXIT_INTERRUPTED
     return 0 if any(ds.good for ds in datasets) else EXIT_FAILED
