@@ -8,7 +8,7 @@ SYNOPSIS
     >>> s["in_view"], s["found"], s["wrong"], round(s["rms_px"], 4), s["rejected"]
     (4, 2, 1, 0.1581, {'saturated': 1})
     >>> cell(s)
-    '0.158 / 0.195 (50%)'
+    '0.158 / 0.195 (50%, 1 wrong)'
 
     units = make_units(npose=2, seed=0)            # what to render, and the exposures of each
     records = run_units(units, jobs=2, log=print)  # render, expose, detect: per (table, row, method) errors
@@ -75,7 +75,7 @@ from ..simulate.camera import remember_rays
 from ..methods import METHODS, PoseImages
 from ..parallel import process_map
 from ..pattern.layout import make_layout
-from ..simulate.captures import averaged_captures
+from ..simulate.captures import averaged_captures, lit_box
 from ..simulate.visibility import in_view, true_windows
 from .scoring import MATCH_PX, perturbed_start
 
@@ -201,15 +201,23 @@ def _found(name: str, q: PoseImages):
 
 
 def corner_errors(corners, reasons, why: str, truth: np.ndarray, view: np.ndarray):
-    """(errors px of the in-view corners, NaN = none; their reasons, '' where reported)"""
+    """(errors px of the in-view corners, NaN = none; their reasons, '' where reported)
+
+    A missing corner's reason: the method's own for that corner, else `why` (no board), else
+    'no fit or moved out of its window' (the refiners that say no more).
+
+        >>> t = np.zeros((1, 3, 2)); view = np.array([[True, True, False]])
+        >>> corner_errors(np.array([[[0.3, 0.4], [np.nan, np.nan], [0, 0]]]), None, "", t, view)
+        (array([0.5, nan]), ['', 'no fit or moved out of its window'])
+        >>> corner_errors(None, np.array([["dim", "", ""]], object), "no corner", t, view)[1]
+        ['dim', 'no corner']
+    """
     n = int(view.sum())
-    if corners is None:
-        return np.full(n, np.nan), [why or "no board"] * n
-    c = np.asarray(corners, float)[view]
-    e = np.linalg.norm(c - truth[view], axis=-1)
-    r = (np.asarray(reasons, dtype=object)[view] if reasons is not None else np.full(n, "", dtype=object))
-    return e, [str(x) if not np.isfinite(v) and x else ("no fit or moved out of its window" if not np.isfinite(v)
-                                                         else "") for v, x in zip(e, r)]
+    e = np.full(n, np.nan) if corners is None else np.linalg.norm(np.asarray(corners, float)[view] - truth[view],
+                                                                   axis=-1)
+    r = np.asarray(reasons, dtype=object)[view] if reasons is not None else np.full(n, "", dtype=object)
+    say = why if corners is None and why else "no fit or moved out of its window"
+    return e, ["" if np.isfinite(v) else (str(x) if x else say) for v, x in zip(e, r)]
 
 
 def run_unit(u: Unit) -> tuple[list[dict], float]:
@@ -225,6 +233,7 @@ def run_unit(u: Unit) -> tuple[list[dict], float]:
     start = perturbed_start(truth, seed, u.index)
     window = true_windows(model, layout, rt)
     fs = float(simulate.full_scale_code(16))
+    roi = lit_box(E[at["checkerboard"][0]], screen.room)  # the averaged captures where the screen is
     out = []
     for j, x in enumerate(u.exposures):
         rng = np.random.default_rng([5, seed, u.index, j])
@@ -232,12 +241,15 @@ def run_unit(u: Unit) -> tuple[list[dict], float]:
         def expose(img):
             return simulate.expose(img, gain=x.gain, noise=x.read, shot=x.shot, bits=16, rng=rng)
 
+        names = TABLES[x.table][1]
         q = PoseImages(layout, fs, frames=expose(E[at["rotstar"]]), start=start, start_window=window)
-        q.checkerboard = averaged_captures(E[at["checkerboard"][0]], expose, CAPTURES)
-        q.star = averaged_captures(E[at["star"][0]], expose, CAPTURES)
-        if "phase" in at:
+        if "saddle" in names:
+            q.checkerboard = averaged_captures(E[at["checkerboard"][0]], expose, CAPTURES, roi)
+        if "star" in names:
+            q.star = averaged_captures(E[at["star"][0]], expose, CAPTURES, roi)
+        if "phase" in names:
             q.phase = expose(E[at["phase"]]).reshape((2, 4) + E.shape[1:])
-        for name in TABLES[x.table][1]:
+        for name in names:
             e, why = corner_errors(*_found(name, q), truth, view)
             out.append({"table": x.table, "row": x.row, "method": name, "errors": e.tolist(), "why": why})
     return out, time.perf_counter() - t0
