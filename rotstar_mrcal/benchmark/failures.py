@@ -349,14 +349,26 @@ def _say(s) -> str:
     return f"RMS {s['rms_px']:.3f} px, {100 * s['found'] / s['in_view']:.0f}% found"
 
 
+def _range(v: list[float]) -> str:
+    lo, hi = f"{min(v):.3f}", f"{max(v):.3f}"
+    return f"at {lo} px" if lo == hi else f"within {lo}-{hi} px"
+
+
 def findings(summary: dict) -> str:
-    """What the numbers say, one sentence per table, written from them"""
+    """What the numbers say, one paragraph of a sentence or two per table, written from them"""
     out = []
     hi, lo = f"{max(GAINS):g}", f"{min(GAINS):g}"
     if "saturation" in summary:
+        sat = summary["saturation"]
+        first = next((row for row, ms in sat.items() if float(row) >= 1 and "phase" in ms
+                      and ms["phase"]["found"] < 0.5 * ms["phase"]["in_view"]), None)
         out.append(f"Saturation: from gain {lo} to {hi} the phase method with its check goes from "
                    f"{_say(_get(summary, 'saturation', lo, 'phase'))} to "
-                   f"{_say(_get(summary, 'saturation', hi, 'phase'))}; keeping the clipped samples it goes to "
+                   f"{_say(_get(summary, 'saturation', hi, 'phase'))}"
+                   + (f"; already at gain {first} it keeps {_pct(sat[first]['phase'])} (the crests of the four "
+                      "steps cover every phase, so a window where the white clips is clipped in some step)"
+                      if first else "")
+                   + f"; keeping the clipped samples it goes to "
                    f"{_say(_get(summary, 'saturation', hi, 'phase-keep'))}; rotstar from "
                    f"{_say(_get(summary, 'saturation', lo, 'rotstar'))} to "
                    f"{_say(_get(summary, 'saturation', hi, 'rotstar'))}, the star from "
@@ -367,22 +379,28 @@ def findings(summary: dict) -> str:
         ph = {row: ms["phase"]["rms_px"] for row, ms in g.items() if "phase" in ms}
         rs = [ms["rotstar"]["rms_px"] for ms in g.values() if "rotstar" in ms]
         worst = max(ph, key=lambda k: ph[k] if np.isfinite(ph[k]) else -1) if ph else None
+        matched = ph.get(f"{ENCODED_GAMMA:g}", math.nan)
+        ratio = ph[worst] / matched if worst and matched > 0 else math.nan
         out.append(f"Gamma mismatch (pattern encoded for {ENCODED_GAMMA:g}): the phase method's RMS is "
                    + ", ".join(f"{v:.3f} px at {k}" for k, v in ph.items())
-                   + (f" (worst: screen gamma {worst}, {ph[worst] / ph[f'{ENCODED_GAMMA:g}']:.1f} times the "
-                      f"matched one)" if worst and f"{ENCODED_GAMMA:g}" in ph and ph[f"{ENCODED_GAMMA:g}"] > 0
+                   + (f" (worst: screen gamma {worst}, {ratio:.2f} times the matched one)" if np.isfinite(ratio)
                       else "")
-                   + (f"; rotstar's stays within {min(rs):.3f}-{max(rs):.3f} px." if rs else "."))
+                   + (f"; rotstar's stays {_range(rs)}." if rs else ".")
+                   + (" A mismatched gamma bends each fringe symmetrically about its crest and trough, so the "
+                      "4-step phase errs by an odd function of the phase that vanishes at phase 0, where the "
+                      "corners are (the fringes' period is the pitch): the phase planes' zero hardly moves."
+                      if np.isfinite(ratio) and ratio < 1.25 else ""))
     if "tilt" in summary:
         parts = []
         for m in TABLES["tilt"][1]:
-            rows = summary["tilt"]
-            v = {row: ms[m] for row, ms in rows.items() if m in ms}
+            v = {row: ms[m] for row, ms in summary["tilt"].items() if m in ms}
             if not v:
                 continue
             worst = max(v, key=lambda k: _badness(v[k]))
+            why = next(iter(v[worst]["rejected"]), "")
             parts.append(f"{TITLES[m]} {_say(v.get('0, 0'))} head-on, worst at tilt, roll {worst} degrees "
-                         f"({_say(v[worst])}; {v[worst]['wrong']} wrong)")
+                         f"({_say(v[worst])}, {v[worst]['wrong']} wrong" + (f"; rejected: {why}" if why else "")
+                         + ")")
         out.append("Tilt and roll: " + "; ".join(parts) + ".")
     if "noise" in summary:
         n = summary["noise"]
@@ -390,7 +408,7 @@ def findings(summary: dict) -> str:
             f"read {row.split(', ')[0]}, shot {row.split(', ')[1]}: "
             + ", ".join(f"{TITLES[m]} {ms[m]['rms_px']:.3f}" for m in TABLES['noise'][1] if m in ms) + " px RMS"
             for row, ms in n.items()) + ".")
-    return " ".join(out)
+    return "\n\n".join(out)
 
 
 def setup_line(npose: int, seed: int) -> str:
@@ -422,18 +440,27 @@ def readme_line(summary: dict) -> str:
     hi = f"{max(GAINS):g}"
     worst = max((f"{g:g}" for g in SCREEN_GAMMAS),
                 key=lambda k: (_get(summary, "gamma", k, "phase") or {"rms_px": -1})["rms_px"])
-    st = {row: ms["star"] for row, ms in summary.get("tilt", {}).items() if "star" in ms}
-    bad = max(st, key=lambda k: _badness(st[k])) if st else None
-    return (f"With the white clipped (gain {hi}) the phase-shift method finds "
-            f"{_pct(_get(summary, 'saturation', hi, 'phase'))} of the corners "
-            f"({_rms(_get(summary, 'saturation', hi, 'phase-keep'))} px RMS if it keeps the clipped samples) and "
-            f"rotstar {_pct(_get(summary, 'saturation', hi, 'rotstar'))} "
-            f"({_rms(_get(summary, 'saturation', hi, 'rotstar'))} px); on a screen of gamma {worst} showing a "
-            f"pattern encoded for {ENCODED_GAMMA:g} phase's RMS is {_rms(_get(summary, 'gamma', worst, 'phase'))} px "
-            f"against {_rms(_get(summary, 'gamma', f'{ENCODED_GAMMA:g}', 'phase'))} matched"
-            + (f"; the star's worst tilt and roll ({bad} degrees) gives {_rms(st[bad])} px, "
-               f"{_pct(st[bad])} found" if bad else "")
-            + " (doc/benchmark.md, *Failure modes*).")
+    tilt = summary.get("tilt", {})
+    top = [row for row in tilt if float(row.split(",")[0]) == max(TILTS)]
+
+    def at_top(m):
+        ss = [tilt[row][m] for row in top if m in tilt[row]]
+        return (f"{100 * sum(x['found'] for x in ss) / max(sum(x['in_view'] for x in ss), 1):.0f}%",
+                max((x["rms_px"] for x in ss if x["found"]), default=math.nan))
+
+    parts = [f"With the white clipped (gain {hi}) the phase-shift method finds "
+             f"{_pct(_get(summary, 'saturation', hi, 'phase'))} of the corners "
+             f"({_rms(_get(summary, 'saturation', hi, 'phase-keep'))} px RMS if it keeps the clipped samples), "
+             f"rotstar {_pct(_get(summary, 'saturation', hi, 'rotstar'))} "
+             f"({_rms(_get(summary, 'saturation', hi, 'rotstar'))} px)",
+             f"a screen of gamma {worst} showing a pattern encoded for {ENCODED_GAMMA:g} leaves phase at "
+             f"{_rms(_get(summary, 'gamma', worst, 'phase'))} px RMS "
+             f"({_rms(_get(summary, 'gamma', f'{ENCODED_GAMMA:g}', 'phase'))} matched)"]
+    if top:
+        (sf, sr), (rf, rr) = at_top("star"), at_top("rotstar")
+        parts.append(f"at {max(TILTS)} degrees of tilt (any roll) the star finds {sf} (at most {sr:.3f} px RMS), "
+                     f"rotstar {rf} (at most {rr:.3f} px)")
+    return "; ".join(parts) + " (doc/benchmark.md, *Failure modes*)."
 
 
 def _badness(s: dict) -> tuple:
