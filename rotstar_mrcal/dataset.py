@@ -275,3 +275,178 @@ def write_pose(seq: str, pose: str, images: dict[str, np.ndarray]) -> str:
             if not cv2.imwrite(tmp, img):
                 raise OSError(f"cannot write {fn}")
     return folder
+
+
+# ---- several cameras: seq/poseNNN/camera-K/<file> ---------------------------------------
+CAMERA_PREFIX = "camera-"
+
+
+def camera_folder(k: int) -> str:
+    """The folder name of camera k inside a pose folder
+
+    >>> camera_folder(1)
+    'camera-1'
+    """
+    return f"{CAMERA_PREFIX}{int(k)}"
+
+
+def camera_index(name: str) -> int | None:
+    """k of a folder named camera-k (k digits without a sign), else None
+
+    >>> camera_index("camera-2"), camera_index("camera-x"), camera_index("pose000")
+    (2, None, None)
+    """
+    tail = name[len(CAMERA_PREFIX):] if name.startswith(CAMERA_PREFIX) else ""
+    return int(tail) if tail.isdigit() else None
+
+
+def is_multi_camera(seq: str) -> bool:
+    """Is seq a multi-camera dataset: does some sub-folder hold camera-K folders?"""
+    try:
+        entries = sorted(os.listdir(seq))
+    except OSError:
+        return False
+    for e in entries:
+        folder = os.path.join(seq, e)
+        if os.path.isdir(folder) and not e.startswith("."):
+            try:
+                if any(camera_index(c) is not None and os.path.isdir(os.path.join(folder, c))
+                       for c in os.listdir(folder)):
+                    return True
+            except OSError:
+                continue
+    return False
+
+
+@dataclasses.dataclass
+class Rig:
+    """The layout of a multi-camera dataset (read_rig): which camera saw which pose
+
+    poses[k] lists camera k's pose folders relative to seq,
+    'poseNNN/camera-k', each readable by load_pose(seq, name, frames) as a
+    one-camera pose folder; sizes[k] is camera k's image size (width,
+    height); absent[k] names the poses in which camera k has no folder (it
+    did not see the board there).
+    """
+
+    seq: str
+    cameras: list[int]  # 0, 1, ... (every index up to the largest present)
+    pose_names: list[str]  # poseNNN, sorted
+    poses: dict[int, list[str]]
+    sizes: dict[int, tuple[int, int]]
+    absent: dict[int, list[str]]
+
+
+def image_size(fn: str) -> tuple[int, int] | None:
+    """(width, height) of an image from its header (PNG) or by reading it; None if unreadable
+
+    >>> import tempfile
+    >>> fn = os.path.join(tempfile.mkdtemp(), "a.png"); _ = cv2.imwrite(fn, np.zeros((8, 12), np.uint8))
+    >>> image_size(fn)
+    (12, 8)
+    """
+    try:
+        with open(fn, "rb") as f:
+            head = f.read(24)
+    except OSError:
+        return None
+    if len(head) >= 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    with _quiet_stderr():
+        img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+    return None if img is None else (img.shape[1], img.shape[0])
+
+
+def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
+    """Read the layout of a multi-camera dataset; DatasetError (one line, naming the files) when it is inconsistent
+
+    SYNOPSIS
+
+        >>> import tempfile
+        >>> from rotstar_mrcal.pattern.layout import make_layout
+        >>> seq = tempfile.mkdtemp()
+        >>> layout = make_layout(screen=(800, 600), pitch=100, band=24)
+        >>> _ = write_pattern(seq, layout)
+        >>> img = lambda w, h: {f["file"]: np.zeros((h, w), np.uint8) for f in layout.frames()}
+        >>> for p in ("pose000", "pose001"):
+        ...     _ = write_pose(seq, f"{p}/camera-0", img(60, 40))
+        >>> _ = write_pose(seq, "pose001/camera-1", img(48, 30))     # camera 1 missed pose000's board
+        >>> rig = read_rig(seq)
+        >>> rig.cameras, rig.poses[1], rig.sizes, rig.absent
+        ([0, 1], ['pose001/camera-1'], {0: (60, 40), 1: (48, 30)}, {0: [], 1: ['pose000']})
+
+    A pose folder is poseNNN (digits: mrcal matches the cameras' images of one
+    instant by that number) holding camera-K folders; a camera folder is read
+    exactly as a one-camera pose folder (load_pose). A camera folder missing
+    in a pose is that camera not seeing the board there, not an error. Errors:
+    a pose folder not named poseNNN or holding no camera folder, the camera
+    folders of one pose holding different frames (differing frame counts),
+    one camera's images differing in size between poses, a camera with no
+    pose at all.
+    """
+    if frames is None:
+        frames = read_pattern(seq)[0]["frames"]
+    names = {f["file"] for f in frames}
+    first = next(f["file"] for f in frames if f["kind"] == "rotstar")
+    try:
+        entries = sorted(e for e in os.listdir(seq) if os.path.isdir(os.path.join(seq, e)) and not e.startswith("."))
+    except OSError as e:
+        raise DatasetError(f"{seq}: cannot list the dataset folder ({e.strerror})") from None
+    held: dict[str, dict[int, set]] = {}
+    for e in entries:
+        folder = os.path.join(seq, e)
+        cams = {camera_index(c): c for c in os.listdir(folder)
+                if camera_index(c) is not None and os.path.isdir(os.path.join(folder, c))}
+        if not cams:
+            if names & set(os.listdir(folder)):
+                raise DatasetError(f"{folder}: frames directly in a pose folder of a multi-camera dataset; "
+                                   "put them in camera-0/ (one folder per camera)")
+            continue
+        if not (e.startswith("pose") and e[4:].isdigit()):
+            raise DatasetError(f"{folder}: a multi-camera pose folder must be named poseNNN (digits): mrcal matches "
+                               "the cameras' images of one instant by that number")
+        extra = sorted(set(os.listdir(folder)) - set(cams.values()))
+        if extra:
+            raise DatasetError(f"{os.path.join(folder, extra[0])}: not a camera-K folder; a multi-camera pose folder "
+                               "holds only camera-0/, camera-1/, ...")
+        held[e] = {k: {f for f in os.listdir(os.path.join(folder, c)) if f.lower().endswith(IMAGE_EXTENSIONS)}
+                   for k, c in sorted(cams.items())}
+    if not held:
+        raise DatasetError(f"{seq}: no pose folder holds camera-K folders")
+    numbers = {}
+    for p in held:
+        numbers.setdefault(int(p[4:]), []).append(p)
+    dup = next((v for v in numbers.values() if len(v) > 1), None)
+    if dup:
+        raise DatasetError(f"{seq}: pose folders {dup[0]} and {dup[1]} have the same number; mrcal would take them "
+                           "for one instant")
+    cameras = list(range(max(k for h in held.values() for k in h) + 1))
+    for p, h in held.items():  # the cameras of one pose hold the same frames
+        ks = sorted(h)
+        for k in ks[1:]:
+            if h[k] != h[ks[0]]:
+                diff = sorted(h[k] ^ h[ks[0]])
+                has, lacks = (ks[0], k) if diff[0] in h[ks[0]] else (k, ks[0])
+                raise DatasetError(
+                    f"{os.path.join(seq, p, camera_folder(lacks), diff[0])}: missing, though "
+                    f"{os.path.join(seq, p, camera_folder(has))} has it ({len(h[lacks])} vs {len(h[has])} frames): "
+                    "the cameras of a pose must hold the same frames")
+    poses = {k: [f"{p}/{camera_folder(k)}" for p in held if k in held[p]] for k in cameras}
+    absent = {k: [p for p in held if k not in held[p]] for k in cameras}
+    sizes = {}
+    for k in cameras:
+        if not poses[k]:
+            raise DatasetError(f"{seq}: no pose holds a {camera_folder(k)} folder, though a higher-numbered camera "
+                               "exists; cameras are numbered 0, 1, ... without gaps")
+        seen = {}
+        for name in poses[k]:
+            fn = os.path.join(seq, name, first)
+            s = image_size(fn)
+            if s is not None:
+                seen.setdefault(s, fn)
+        if len(seen) > 1:
+            (s0, f0), (s1, f1) = list(seen.items())[:2]
+            raise DatasetError(f"{f1}: image size {s1[0]}x{s1[1]} differs from {f0} ({s0[0]}x{s0[1]}): every image "
+                               f"of one camera ({camera_folder(k)}) must have the same size")
+        sizes[k] = next(iter(seen)) if seen else None
+    return Rig(seq, cameras, sorted(held), poses, sizes, absent)

@@ -213,8 +213,12 @@ def _from_rotstar(fn_name: str):
     return run
 
 
-def _phase(p: PoseImages) -> Found:
-    """detect.phase.phase_corners from rotstar's corners (the paper's phase-shift baseline)"""
+def _phase(p: PoseImages, saturation: str = "reject") -> Found:
+    """detect.phase.phase_corners from rotstar's corners (the paper's phase-shift baseline)
+
+    saturation: 'reject' drops a corner whose phase window holds a clipped
+    value; 'keep' fits the clipped values as they are (the paper's pipeline).
+    """
     from .detect.phase import phase_corners
 
     if p.phase is None:
@@ -224,7 +228,7 @@ def _phase(p: PoseImages) -> Found:
     start = _start(p)
     if isinstance(start, Found):
         return start
-    r = phase_corners(p.phase, start[0], p.layout.corner_phase(), p.full_scale)
+    r = phase_corners(p.phase, start[0], p.layout.corner_phase(), p.full_scale, saturation=saturation)
     if not np.isfinite(r.corners).all(axis=-1).any():
         return Found(None, None, "no corner: " + reason_counts(r.reason), reasons=r.reason)
     return Found(r.corners, None, reasons=r.reason)
@@ -300,10 +304,14 @@ METHODS = {m.name: m for m in (
            "checkerboard frame, Lucchese-Mitra saddle fit from rotstar's corners", _from_rotstar("saddle_refine")),
     Method("phase", "phase shifting (4-step, phase planes)", "phase", "rotstar",
            "phase-shift frames along x and y: where both phases take the corner's, planes fitted in 7x7 px about "
-           "rotstar's corners", _phase, detail="half-window 3", demo=False),
+           "rotstar's corners; a corner with a clipped value in its window is rejected", _phase,
+           detail="half-window 3"),
+    Method("phase-keep", "phase shifting, clipped values kept", "phase", "rotstar",
+           "the same, fitting clipped values as they are (the paper's pipeline: saturation hurts, not removes)",
+           _phase, ("keep",), detail="half-window 3"),
     Method("star", "star (Schops et al.), symmetric refinement", "star", "rotstar",
            "star frame, the symmetric refinement (Eq. 1) on the one frame from rotstar's corners, rotstar's window",
-           _star, demo=False),
+           _star),
     Method("mrgingham", "mrgingham", "square", "own", "square checkerboard, mrgingham", _mrgingham, relabel=True),
     Method("mrgingham-noclahe", "mrgingham --noclahe", "square", "own",
            "square checkerboard, mrgingham --noclahe (no CLAHE equalisation)", _mrgingham, ("--noclahe",),

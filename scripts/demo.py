@@ -3,7 +3,7 @@
 
 SYNOPSIS
 
-    python scripts/demo.py --out demo-out          # what `make demo` runs (~3 min on 2 cores)
+    python scripts/demo.py --out demo-out          # what `make demo` runs (~2.5 min on 2 cores)
     python scripts/demo.py --out /tmp/d --quick    # fewer poses, for a smoke run
 
 The set-up (camera, coma, pose groups, exposures) is rotstar_mrcal.demo.scene;
@@ -22,10 +22,15 @@ printed before it runs:
    true camera;
 4. rotstar-report over the three exposures.
 
-The report's path and its headline table are printed at the end (stdout); a
-full run (not --quick, seed 1) also writes the table into the marked blocks
-of README.md and doc/validation.md (--no-docs: not). The images are not kept
-(3 exposures x 24 poses x 9 frames of 16-bit PNG would be ~1 GB);
+The pattern is the paper's whole sequence (rotstar-pattern --paper-sequence),
+so the phase-shift and star methods run beside rotstar and the checkerboard
+ones. The report's path, its headline table and the paper's claims as
+verdicts (rotstar_mrcal.validate.claims) are printed at the end (stdout); a
+full run (not --quick, seed 1) also writes the table and the verdict lines
+into the marked blocks of README.md, and the table, the error by tilt of the
+test poses and every claim with its numbers into doc/validation.md
+(--no-docs: not). The images are not kept
+(3 exposures x 18 poses x 31 frames of 16-bit PNG would be several GB);
 --keep-images writes them as rotstar datasets.
 """
 
@@ -39,6 +44,7 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
+import re  # noqa: E402
 import shlex  # noqa: E402
 import shutil  # noqa: E402
 import signal  # noqa: E402
@@ -76,7 +82,7 @@ def parse_args(argv=None):
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel processes")
     p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"noise seed (default {DEFAULT_SEED})")
     p.add_argument("--quick", action="store_true", help="two turn angles per place instead of three (smoke run)")
-    p.add_argument("--keep-images", action="store_true", help="also write every frame (16-bit PNG, ~1 GB)")
+    p.add_argument("--keep-images", action="store_true", help="also write every frame (16-bit PNG, several GB)")
     p.add_argument("--no-docs", action="store_true", help="do not rewrite README.md and doc/validation.md")
     return p.parse_args(argv)
 
@@ -88,12 +94,12 @@ def corner_sets(a, out: str) -> tuple[dict, dict]:
     from rotstar_mrcal.simulate.poses import centred_pose
 
     pat = os.path.join(out, "pattern")
-    run(["rotstar-pattern", "--out", pat], stdout=subprocess.DEVNULL)
+    run(["rotstar-pattern", "--paper-sequence", "--out", pat], stdout=subprocess.DEVNULL)
     model, layout, square = scene.camera_and_boards(pat)
     rts = scene.group_poses(model, layout, scene.TILTS[::2] if a.quick else scene.TILTS)
     rts_sq = {g: centred_pose(v, layout, square) for g, v in rts.items()}
     npose = {g: len(v) for g, v in rts.items()}
-    methods = method_names(needs=("rotstar", "checkerboard"), demo=True)
+    methods = method_names(needs=("rotstar", "checkerboard", "phase", "star"), demo=True)
     log(f"rendering {sum(npose.values())} poses once, exposing and detecting at {len(scene.EXPOSURES)} exposures "
         f"({', '.join(methods)}, ChArUco) in {a.jobs} processes")
     res = capture.capture_all(a.jobs, layout, square, model, rts, rts_sq, a.seed, out, a.keep_images, methods, log,
@@ -116,6 +122,8 @@ def corner_sets(a, out: str) -> tuple[dict, dict]:
         plots.exposure_figure(crops, os.path.join(out, "exposures.png"))
     with open(os.path.join(out, "setup.md"), "w") as f:
         f.write(scene.setup_notes(npose, scene.reach_px(model, layout, rts)))
+        f.write(scene.rejection_notes({label: [r.rejected.get(label, {}) for r in res.values()]
+                                       for label, _ in scene.EXPOSURES}))
     return found, crops
 
 
@@ -142,14 +150,26 @@ def crossval_and_report(a, out: str, found: dict, crops: dict) -> tuple[str, str
     return rep, run(cmd, stdout=subprocess.PIPE, text=True).stdout
 
 
-def write_docs(headline: str) -> None:
-    """The headline table into the marked blocks of README.md and doc/validation.md"""
+def write_docs(headline: str, rep: str) -> None:
+    """The headline table into the marked blocks of README.md and doc/validation.md; the report's verdicts
+    and the paper's claims in short into README.md (demo:claims), whole with the table by tilt (the report's paper.md) into
+    doc/validation.md (demo:paper); the report's figure against the truth as doc/img/demo-vs-truth.png"""
     from rotstar_mrcal.docblock import rewrite_block
 
-    table = "\n".join(line for line in headline.splitlines() if line.startswith("|"))
-    for path in (os.path.join(ROOT, "README.md"), os.path.join(ROOT, "doc", "validation.md")):
-        if rewrite_block(path, "demo:headline", table):
-            log(f"rewrote the block demo:headline of {os.path.relpath(path)}")
+    lines = headline.splitlines()
+    table = "\n".join(line for line in lines if line.startswith("|"))
+    claims = "\n".join([line for line in lines if line.startswith("- ")] + [""]
+                       + [line for line in lines if re.match(r"\d+\. ", line)])
+    with open(os.path.join(rep, "paper.md")) as f:
+        paper = f.read().replace("## ", "### ")  # sections below doc/validation.md's "The demo"
+    readme, validation = os.path.join(ROOT, "README.md"), os.path.join(ROOT, "doc", "validation.md")
+    for path, name, text in ((readme, "demo:headline", table), (validation, "demo:headline", table),
+                             (readme, "demo:claims", claims), (validation, "demo:paper", paper)):
+        if rewrite_block(path, name, text):
+            log(f"rewrote the block {name} of {os.path.relpath(path)}")
+    fig = os.path.join(ROOT, "doc", "img", "demo-vs-truth.png")  # README's figure: the report's, redrawn
+    shutil.copyfile(os.path.join(rep, "summary-truth.png"), fig)
+    log(f"wrote {os.path.relpath(fig)}")
 
 
 def main(argv=None) -> int:
@@ -170,7 +190,7 @@ def main(argv=None) -> int:
     print()
     print(headline.rstrip())
     if not (a.no_docs or a.quick or a.seed != DEFAULT_SEED):
-        write_docs(headline)
+        write_docs(headline, rep)
     return 0
 
 

@@ -81,6 +81,9 @@ def test_two_groups_compared(heldout_run, d435_seq, run_cli, tmp_path):
     assert m["heldout"]["A->B"]["mean_px"] < 0.03 and m["heldout"]["B->A"]["mean_px"] < 0.03
     assert m["truth"]["A"]["median_px"] < 0.1 and m["truth"]["A"]["method"] == "procrustes"
     assert m["crossval"]["verdict"] in ("consistent", "borderline", "model errors")
+    for d in ("A->B", "B->A"):  # the true tilt of every test pose (rotstar-report's table by tilt)
+        t = m["heldout"][d]["tilt_deg"]
+        assert set(m["heldout"][d]["per_pose"]) <= set(t) and all(0 <= v < 90 for v in t.values())
     for f in (m["figures"]["maps"], res["figures"]["per_pose"], m["models"]["A"]):
         assert os.path.exists(xdir / f)
     assert n_even >= 5 and n_odd >= 5

@@ -83,3 +83,40 @@ def test_capture_pose_uses_every_frame_of_the_sequence(tmp_path):
     dataset.write_pattern(str(pose.parent), layout)
     p = dataset.load_pose(str(pose.parent), "pose000", layout)
     assert p.rotstar.shape == (8, 400, 640) and p.identity.shape == (10, 400, 640)
+
+
+def test_capture_pose_with_the_paper_sequence(tmp_path):
+    """One demo pose of the paper's whole sequence on a small screen and camera: phase shifting (both ways of
+    treating clipped values) and the star find the board near the truth at every exposure, and at the saturating
+    one 'phase' says which corners it rejected as clipped while 'phase-keep' keeps them"""
+    from rotstar_mrcal.demo import capture
+
+    model = simulate.preset_model("pinhole-small")
+    layout = make_layout(screen=(800, 600), pitch=100, band=24, phase_period=100, star_segments=16)
+    square = make_layout(screen=(1000, 1000), pitch=100, band=24, nx=6, ny=6)
+    rt = simulate.look_at_pose(model, layout, (320, 200), 0.25)
+    capture.init_worker(layout, square, (model.intrinsics(), model.imagersize()), simulate.camera_rays(model))
+    try:
+        r = capture.capture_pose(capture.Job("A", 0, rt, rt, 1, str(tmp_path), False,
+                                             ("rotstar", "phase", "phase-keep", "star")))
+    finally:
+        capture._W.clear()
+    truth = simulate.true_corners(model, layout, rt)
+    for label, found in r.found.items():
+        for m in ("rotstar", "phase-keep", "star") + (("phase",) if "saturated" not in label else ()):
+            corners, _, why = found[m]
+            assert corners is not None, (label, m, why)
+            d = np.linalg.norm(corners - truth, axis=-1)
+            assert np.nanmax(d) < 0.3 and np.isfinite(d).mean() > 0.9, (label, m, np.nanmax(d))
+    sat = scene.EXPOSURES[-1][0]
+    assert "saturated" in " ".join(r.rejected[sat]["phase"].ravel())
+    assert not any(r.rejected[sat]["phase-keep"].ravel())
+
+
+def test_docs_have_the_demos_paper_blocks():
+    """scripts/demo.py writes the paper's claims into README.md and the whole section into doc/validation.md"""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for path, name in (("README.md", "demo:claims"), ("doc/validation.md", "demo:paper")):
+        with open(os.path.join(root, path)) as f:
+            text = f.read()
+        assert text.count(f"<!-- {name}:begin -->") == 1 and text.count(f"<!-- {name}:end -->") == 1, (path, name)

@@ -45,9 +45,9 @@ def test_selections_keep_the_experiments_methods():
         "rotstar", "rotstar-weighted", "opencv-sb", "cornersubpix", "saddle"]
     assert method_names(needs="square", demo=True) == ["mrgingham"]
     assert method_names(variants=False) == ["rotstar", "opencv-sb", "opencv-classic", "cornersubpix", "saddle",
-                                            "phase", "star", "mrgingham", "mrgingham-noclahe"]
-    assert method_names(start="rotstar") == ["cornersubpix", "saddle", "phase", "star"]
-    assert method_names(needs=("phase", "star"), demo=True) == []  # the paper's table comes later
+                                            "phase", "phase-keep", "star", "mrgingham", "mrgingham-noclahe"]
+    assert method_names(start="rotstar") == ["cornersubpix", "saddle", "phase", "phase-keep", "star"]
+    assert method_names(needs=("phase", "star"), demo=True) == ["phase", "phase-keep", "star"]  # the paper's table
 
 
 def test_unknown_names():

@@ -42,7 +42,7 @@ def errors(vnl: str, seq: str, truth) -> dict[str, np.ndarray]:
             if v is not None}
 
 
-@pytest.mark.parametrize("method, rms, worst", [("phase", 0.03, 0.06), ("star", 0.03, 0.06)])
+@pytest.mark.parametrize("method, rms, worst", [("phase", 0.03, 0.06), ("phase-keep", 0.03, 0.06), ("star", 0.03, 0.06)])
 def test_corners_near_the_truth(paper_seq, run_cli, method, rms, worst):
     seq, truth = paper_seq
     r = run_cli("rotstar-detect", seq, "--method", method, "-q")

@@ -40,6 +40,9 @@ def test_report_builds_from_a_small_simulated_run(run_cli, tmp_path):
         assert os.path.exists(out / f), f
     md = (out / "index.md").read_text()
     assert md.startswith("# small run") and "## exposure 1" in md and "## exposure 2" in md
+    # simulated: the error by tilt of the test poses (also paper.md); not the paper's patterns: no claims
+    assert "## By tilt of the test poses" in md and "claims" not in md + (out / "headline.md").read_text()
+    assert (out / "paper.md").read_text().startswith("## By tilt of the test poses")
     for img in re.findall(r"!\[[^]]*\]\(([^)]+)\)", md) + re.findall(r"src='([^']+)'", (out / "index.html").read_text()):
         assert os.path.exists(out / img), img  # every figure the pages show is in the folder
     # mrcal's own views of the first method's calibration, each with the command that redraws it

@@ -14,10 +14,13 @@ import pytest
 from rotstar_mrcal.cli.synth import main
 from rotstar_mrcal.optics import Seidel, gaussian_psf, wavefront_psf
 from rotstar_mrcal.synth import table, verdicts
-from rotstar_mrcal.synth.experiment import ABERRATIONS, SYMMETRIC, Protocol, quick_protocol, render_views, run_task
+from rotstar_mrcal.optics import Optics
+from rotstar_mrcal.synth.experiment import (ABERRATIONS, SYMMETRIC, Protocol, psf_kernel, quick_protocol, render_views,
+                                            run_task)
 from rotstar_mrcal.synth.metrics import pairwise_range
+from rotstar_mrcal.detect.phase import wrapped_phase
 from rotstar_mrcal.synth.patterns import Star, pattern_frames
-from rotstar_mrcal.synth.refiners import refine
+from rotstar_mrcal.synth.refiners import applies, refine
 from rotstar_mrcal.synth.imaging import ViewRenderer, star_coverage, star_edge_measure
 from rotstar_mrcal.synth.sweep import cache_path, pending_tasks, run_sweep
 from rotstar_mrcal.synth.views import tilt_rotation, view_jacobian
@@ -164,6 +167,90 @@ def test_coma_biases_the_same_refiner():
     assert np.linalg.norm(q.mean(axis=0) - p.truth) > 1.0  # the comet's light is off the paraxial point
 
 
+# ---- the phase-shift pattern and its refiner --------------------------------
+@pytest.mark.parametrize("phi,alpha", VIEWS)
+def test_phase_pattern_has_phase_zero_at_the_corner_without_blur(phi, alpha):
+    """Delta PSF: the 4-step phase of every pixel is k . (centre - corner), the plane fit's zero is the corner"""
+    J = view_jacobian(phi, alpha)
+    fr = [f.mapped(J) for f in pattern_frames("phase")]
+    apex = np.array((10.3, 9.6))
+    img, grad = ViewRenderer(np.ones((1, 1)), 4, 21)(fr, apex)
+    assert img.shape == (8, 21, 21) and img.min() >= 0 and img.max() <= 1
+    y, x = np.mgrid[0:21, 0:21].astype(float)
+    for axis in range(2):
+        phi_img, mod = wrapped_phase(img[4 * axis : 4 * axis + 4])
+        k = fr[4 * axis].k
+        want = k[0] * (x - apex[0]) + k[1] * (y - apex[1])
+        assert np.abs(np.angle(np.exp(1j * (phi_img - want)))).max() < 1e-6  # pixel averaging keeps the phase
+        assert mod.min() > 0.4  # 0.5 times the pixel's sinc attenuation
+    starts = apex + np.array([[0.8, -0.7], [-0.4, 0.9]])
+    assert np.abs(refine("phase", 28 + 200 * img, starts) - apex).max() < 1e-6
+
+
+def test_fringe_gradient_matches_finite_differences_of_the_render():
+    """The bound's d pixel / d corner for fringes, through a coma PSF"""
+    k = wavefront_psf(Seidel(coma=2.0), Optics(), 4)
+    r = ViewRenderer(k, 4, 21)
+    fr = [f.mapped(view_jacobian(0.6, 0.4)) for f in pattern_frames("phase")]
+    apex, e = np.array((10.3, 9.6)), 1e-2  # smooth: the truncation error is ~(k e)^2 / 6, float32 noise ~1e-7 / e
+    _, g = r(fr, apex)
+    for i in range(2):
+        d = np.zeros(2)
+        d[i] = e
+        fd = (r(fr, apex + d, False)[0] - r(fr, apex - d, False)[0]) / (2 * e)
+        assert np.abs(fd + g[..., i]).max() < 1e-3 * np.abs(g).max()
+
+
+@pytest.mark.parametrize("aberration", ["none", "spherical"])
+def test_phase_refiner_subpixel_under_a_symmetric_blur(aberration):
+    """Point-symmetric PSF, tilted view, no noise: the phase corner is within 0.01 px of the truth"""
+    p = Protocol(aberrations=(aberration,))
+    r = ViewRenderer(psf_kernel(p, aberration), 4, 30)
+    fr = [f.mapped(view_jacobian(math.radians(50), math.radians(30))) for f in pattern_frames("phase")]
+    for apex in (np.array((15.3, 15.7)), np.array((14.55, 15.1))):
+        img, _ = r(fr, apex, False)
+        q = refine("phase", 28 + 200 * img, apex + np.array([[0.9, -0.8]]))
+        assert np.linalg.norm(q - apex) < 0.01, (aberration, apex, q)
+
+
+def test_cli_refuses_a_run_where_no_refiner_applies(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["experiment", "--quick", "--patterns", "checkerboard", "--refiners", "phase", "--out", str(out)]) == 2
+    assert "no refiner of --refiners (phase) applies" in capsys.readouterr().err and not out.exists()
+
+
+def test_phase_refiner_rejects_wedges_and_table_shows_na():
+    with pytest.raises(ValueError, match="8 frames"):
+        refine("phase", np.zeros((1, 30, 30)), np.array([[15.0, 15.0]]))
+    assert not applies("checkerboard", "phase") and not applies("phase", "opencv") and applies("phase", "phase")
+    p = quick_protocol(aberrations=("spherical", "coma"), noises=(0.0,), phis_deg=(30,), alphas_deg=(0, 90),
+                       repeats=2, patterns=("checkerboard", "rotstar", "phase"), refiners=("phase", "symmetric"))
+
+    def det(shift):  # view 1 is off by `shift` px in x: the stars with symmetric, phase with phase; the rest NaN
+        d = np.full((2, 2, 3, 2, 2), np.nan, np.float32)
+        off = np.array([[0.0, 0.0], [shift, 0.0]])[None]
+        d[:, :, :2, 1] = (p.truth + off)[:, :, None]
+        d[:, :, 2, 0] = p.truth + 5 * off
+        return d
+
+    res = {(a, 0.0, 30): {"detections": det(v), "truth": p.truth, "fisher": np.tile(np.eye(2), (2, 3, 1, 1))}
+           for a, v in (("spherical", 0.01), ("coma", 0.1))}
+    rows = table.tabulate(p, res)
+    assert {(r["pattern"], r["refiner"]) for r in rows} == {("checkerboard", "symmetric"), ("rotstar", "symmetric"),
+                                                            ("phase", "phase")}
+    means = table.over_tilts(rows)
+    g = table.grid(means, 0.0).splitlines()
+    assert g[0] == "| aberration | pattern | symmetric | phase |"
+    assert "| coma | checkerboard | 0.1000 | n/a |" in g and "| coma | phase | n/a | 0.5000 |" in g
+    vs = verdicts.verdicts(means)  # the n/a cells are skipped, nothing crashes
+    assert [v.status for v in vs][:2] == ["reproduced", "partly reproduced"]
+    obs = verdicts.phase_observation(means)
+    assert obs.lines[0] == "symmetric PSF, sigma_n = 0: phase 0.0500 px, rotstar (symmetric) 0.0100 px: phase x5.00"
+    assert "noise-free, the phase-shift corner is less stable than the rotating star (x5.00" in obs.conclusion
+    assert verdicts.phase_observation([r for r in means if r["pattern"] != "phase"]) is None
+    assert verdicts.observation_markdown(None) == ""
+
+
 # ---- the experiment, the cache, the executors ------------------------------
 TINY = quick_protocol(aberrations=("spherical", "coma"), noises=(0.0, 3.0), phis_deg=(30,), alphas_deg=(0, 90),
                       repeats=2)
@@ -172,11 +259,17 @@ TINY = quick_protocol(aberrations=("spherical", "coma"), noises=(0.0, 3.0), phis
 def test_run_task_deterministic_and_independent_of_grouping():
     a = run_task(TINY, "coma", 30, (0.0, 3.0))
     b = run_task(TINY, "coma", 30, (3.0,))
-    assert a[3.0]["detections"].shape == (2, 2, 3, 3, 2)
+    assert a[3.0]["detections"].shape == (2, 2, 4, 4, 2)
     assert np.array_equal(a[3.0]["detections"], b[3.0]["detections"], equal_nan=True)
     assert not np.array_equal(a[0.0]["detections"], a[3.0]["detections"], equal_nan=True)
     F = a[0.0]["fisher"]
-    assert F.shape == (2, 3, 2, 2) and np.all(np.linalg.eigvalsh(F) > 0)
+    assert F.shape == (2, 4, 2, 2) and np.all(np.linalg.eigvalsh(F) > 0)
+    # only the pairs that apply ran: phase x phase and the stars x the wedge refiners
+    det = a[3.0]["detections"]
+    for j, pat in enumerate(TINY.patterns):
+        for i, ref in enumerate(TINY.refiners):
+            ran = np.isfinite(det[:, :, j, i]).any()  # (the saddle fit fails on the 16-star: no saddle)
+            assert ran == applies(pat, ref) or (pat, ref) == ("star16", "saddle"), (pat, ref)
 
 
 def test_cache_key():
@@ -214,7 +307,11 @@ def test_quick_experiment_outputs(quick_run, capsys):
     assert {"table.md", "table.json", "summary.md", "protocol.json", "psf.png", "views.png",
             "range_noise0.png", "range_noise4.png", "cache"} <= names
     doc = json.load(open(quick_run / "table.json"))
-    assert len(doc["rows"]) == 2 * 2 * 2 * 3 * 3 and len(doc["over_tilts"]) == 2 * 2 * 3 * 3
+    # 3 star patterns x 3 wedge refiners + phase x phase, per aberration, noise (and tilt)
+    assert len(doc["rows"]) == 2 * 2 * 2 * (3 * 3 + 1) and len(doc["over_tilts"]) == 2 * 2 * (3 * 3 + 1)
+    summary = open(quick_run / "summary.md").read()
+    assert "## Phase shifting: our observation" in summary
+    assert re.search(r"\| spherical \| phase \| n/a \| n/a \| n/a \| [0-9.]+ \|", summary)  # opencv saddle symmetric phase
     # a rerun finds everything in the cache
     assert main(["experiment", "--quick", "--out", str(quick_run), "--no-plots"]) == 0
     assert "0 to compute" in capsys.readouterr().err
@@ -250,6 +347,10 @@ def test_quick_table_sanity(quick_run):
             assert r["scatter_over_bound"] > 0.7, r
     # the saddle fit does not apply to the 16-segment star (no saddle): it fails
     assert get(aberration="spherical", noise=0.0, pattern="star16", refiner="saddle")["fail"] > 0.5
+    # noise-free, a symmetric PSF does not shift the fringes' phase: the phase corner is the truth; coma shifts it
+    assert get(aberration="spherical", noise=0.0, pattern="phase", refiner="phase")["rms"] < 1e-3
+    assert get(aberration="coma", noise=0.0, pattern="phase", refiner="phase")["range"] > 0.01
+    assert get(aberration="spherical", noise=0.0, pattern="phase", refiner="symmetric") is None  # n/a
 
 
 def test_dask_scheduler_matches_local(tmp_path):

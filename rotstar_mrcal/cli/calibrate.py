@@ -36,6 +36,15 @@ fits that disagree with no way to tell which is right, is not written
 (OUTDIR/camera-0.cameramodel is removed; the fits stay in OUTDIR/candidates/)
 unless --keep.
 
+Several cameras (a dataset of SEQ/poseNNN/camera-K/ folders, doc/dataset.md):
+all cameras are calibrated at once (one glob per camera, a focal seed per
+camera, the lean model unless --lensmodel), and mrcal's
+OUTDIR/camera-0.cameramodel, camera-1.cameramodel, ... hold each camera's
+intrinsics and extrinsics (camera 0 at the origin); the report gives each
+camera's residuals, outliers and where it is relative to camera 0. A camera
+with more than {100 * cal.MAX_OUTLIER_FRACTION:.0f}% outliers, or a board mrcal mostly rejects (labelled
+differently than in the other cameras), fails the checks.
+
 Exit status (also 130: interrupted): 0 a model was written and passed its checks (or --keep);
 1 the calibration ran and failed (mrcal failed, or the checks); 2 bad
 arguments or inputs that cannot give a model.
@@ -104,6 +113,8 @@ def _main(argv=None) -> int:
         say(f"rotstar-calibrate: {a.corners}: no such file")
         return 2
     make_folder(a.outdir)
+    if dataset.is_multi_camera(a.seq):
+        return _main_rig(a)
     for stale in ("camera-0.cameramodel", "calibration.json"):  # a failed run leaves no old result behind
         if os.path.exists(os.path.join(a.outdir, stale)):
             os.remove(os.path.join(a.outdir, stale))
@@ -141,6 +152,56 @@ def _main(argv=None) -> int:
     if c.model_path:
         print(c.model_path)
     return 0 if c.model_path else 1
+
+
+def _main_rig(a) -> int:
+    """rotstar-calibrate on a multi-camera dataset: one joint solve (validate.rig)"""
+    from ..validate import rig
+
+    for stale in [f for f in os.listdir(a.outdir) if f.startswith("camera-") and f.endswith(".cameramodel")] + [
+            "calibration.json"]:
+        if os.path.exists(os.path.join(a.outdir, stale)):
+            os.remove(os.path.join(a.outdir, stale))
+    vnl = a.corners
+    if vnl is None:
+        vnl, rc = _detect(a)
+        if vnl is None:
+            say("rotstar-calibrate: detection " + ("gave too few boards; nothing to calibrate" if rc == 1 else "failed"))
+            return 1 if rc == 1 else 2
+    try:
+        rs = rig.load_rig_corners(vnl, a.seq)
+        if a.imagersize:
+            rs.imagersizes = {k: tuple(a.imagersize) for k in rs.cameras}
+        if a.dry_run:
+            rig.check_rig(rs)
+            focals = {k: a.focal or rs.focal(k) for k in rs.cameras}
+            lm = cal.resolve_lensmodel(a.lensmodel, rs.imagersizes[0], focals[0])
+            first = os.path.basename(rs.files[0][0])
+            say("$ " + cal.command_line(rig.rig_argv(vnl, rs.layout, rs.imagersizes, focals, lm,
+                                                     os.path.join(a.outdir, "candidates", "rig"),
+                                                     rig.rig_globs(a.seq, rs.cameras, first), rs.weights)))
+            return 0
+        if a.lensmodel.strip().lower() == "splined":
+            raise cal.InputError("--lensmodel splined is for one camera; give a LENSMODEL_... string for a rig")
+        c = rig.calibrate_rig(rs, a.outdir, a.lensmodel, a.focal, keep=a.keep,
+                              log=lambda s: say(s if s.startswith("$ ") else f"rotstar-calibrate: {s}"))
+    except (cal.InputError, dataset.DatasetError) as e:
+        say(f"rotstar-calibrate: {e}")
+        return 2
+    except cal.CalibrationError as e:
+        say(f"rotstar-calibrate: {e}")
+        return 1
+    for line in c.summary_lines():
+        say(f"rotstar-calibrate: {line}")
+    with atomic_write(os.path.join(a.outdir, "calibration.json")) as f:
+        json.dump(c.to_json(), f, indent=1)
+        f.write("\n")
+    if c.failures:
+        say(f"rotstar-calibrate: {'kept despite: ' if c.kept else 'FAILED: '}" + "; ".join(c.failures)
+            + ("" if c.kept else " (no models written; --keep writes them anyway)"))
+    for k in sorted(c.models):
+        print(c.models[k])
+    return 0 if c.models else 1
 
 
 if __name__ == "__main__":

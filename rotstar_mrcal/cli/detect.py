@@ -27,7 +27,14 @@ folder per pose, SEQ/<pose>/<file> for every frame in pattern.json (8- or
 16-bit grayscale PNG). Poses are processed in sorted order; the filename
 column of the output is SEQ/<pose>/<first rotating-star frame>.
 
-Exit status: 0 when at least one pose gave a board, 1 when none did, 2 for
+Several cameras (SEQ/poseNNN/camera-K/<file>, doc/dataset.md): every
+camera's poses are detected and written into the one corners.vnl (filename
+column SEQ/poseNNN/camera-K/<first rotating-star frame>), every camera
+labelling each board the same way (checked per pose across the cameras);
+the printed command has one glob per camera and one focal seed per camera.
+
+Exit status: 0 when at least one pose gave a board (with several cameras:
+when every camera gave the >= 2 boards mrcal needs), 1 when none did, 2 for
 a dataset that cannot be read at all.
 """
 
@@ -122,6 +129,8 @@ def main(argv=None) -> int:
 
 def _main(argv=None) -> int:
     a = parse_args(argv)
+    if dataset.is_multi_camera(a.seq):
+        return _main_rig(a)
     progress = None
 
     def report(r):
@@ -190,6 +199,85 @@ def _main(argv=None) -> int:
             say("rotstar-detect: stdout is not a file: save the corners (rotstar-detect ... > corners.vnl, or -o) "
                 "and put that file's name for corners.vnl below")
         say("next, calibrate with:\n  " + cmd)
+    return 0
+
+
+def _main_rig(a) -> int:
+    """rotstar-detect on a multi-camera dataset (detect.rig)"""
+    from ..detect.rig import detect_rig
+    from ..validate.rig import rig_argv, rig_globs
+    from ..validate.calibrate import LEAN_LENSMODEL, command_line
+    from ..vnl import mrcal_keeps
+
+    try:
+        pattern, layout = dataset.read_pattern(a.seq)
+        rig = dataset.read_rig(a.seq, pattern["frames"])
+    except dataset.DatasetError as e:
+        fail(str(e))
+    if a.output:
+        check_output_path(a.output, [os.path.join(a.seq, "pattern.json")]
+                          + [os.path.join(a.seq, p) for p in rig.pose_names])
+    nx_ny = layout.nx * layout.ny
+    progress = Progress(sum(len(v) for v in rig.poses.values()), a.quiet)
+
+    def report(k, r):
+        if r.found:
+            why = f" ({r.corners.missing_summary()})" if r.corners.n_valid < nx_ny and a.method == "rotstar" else ""
+            progress.step(r.pose, f"{r.corners.n_valid} of {nx_ny} corners{why}")
+        else:
+            progress.step(r.pose, f"skipped: {r.error}", important=True)
+
+    for k in rig.cameras:
+        if rig.absent[k] and not a.quiet:
+            say(f"rotstar-detect: {dataset.camera_folder(k)} has no folder in {len(rig.absent[k])} pose(s) "
+                f"({', '.join(rig.absent[k][:4])}{' ...' if len(rig.absent[k]) > 4 else ''}): no board there")
+    try:
+        det = detect_rig(a.seq, window=a.window, refine=a.refine, max_motion=a.max_motion, jobs=a.jobs,
+                         progress=report, method=a.method, rig=rig)
+    except dataset.DatasetError as e:
+        fail(str(e))
+    for k, d in det.cameras.items():
+        for r in d.rejected:
+            say(f"{r.pose}: skipped: {r.error}")
+        if a.refine == "symmetric" and not a.quiet:
+            say(f"rotstar-detect: {dataset.camera_folder(k)}: {d.display.summary()}")
+    for pose, why in det.disagree.items():
+        say(f"{pose}: skipped in every camera: {why}")
+    weights = det.weights() if a.weights else None
+    if a.output:
+        with atomic_write(a.output) as out:
+            sparse = write_corners(out, det.boards(), weights)
+    else:
+        sparse = write_corners(sys.stdout, det.boards(), weights)
+    for s in sparse:
+        say(sparse_line(os.path.relpath(os.path.dirname(s.file), a.seq), s))
+    dropped = {s.file for s in sparse}
+    found = {k: [r for r in det.found(k) if r.file not in dropped and mrcal_keeps(r.corners.corners)]
+             for k in rig.cameras}
+    for k in rig.cameras:
+        say(f"rotstar-detect: {dataset.camera_folder(k)}: {len(found[k])} of {len(rig.pose_names)} poses gave a "
+            f"board ({rig.sizes[k][0]}x{rig.sizes[k][1]})")
+    if not any(found.values()):
+        return EXIT_FAILED
+    thin = [k for k in rig.cameras if len(found[k]) < 2]
+    if thin:
+        say(f"rotstar-detect: {dataset.camera_folder(thin[0])}: {len(found[thin[0]])} board(s); mrcal needs at least "
+            "2 per camera to match the cameras' instants (record more poses in its view); no command to print")
+        return EXIT_FAILED
+    focals = {k: estimate_focal([r.corners.corners for r in found[k]], layout.board_points()[..., :2],
+                                rig.sizes[k]) for k in rig.cameras}
+    first_frame = next(f["file"] for f in pattern["frames"] if f["kind"] == "rotstar")
+    vnl_name, real = corners_name(a.output)
+    cmd = command_line(rig_argv(vnl_name, layout, rig.sizes, focals, LEAN_LENSMODEL, ".",
+                                rig_globs(a.seq, rig.cameras, first_frame), a.weights))
+    if not a.no_hint:
+        if not real:
+            say("rotstar-detect: stdout is not a file: save the corners (rotstar-detect ... > corners.vnl, or -o) "
+                "and put that file's name for corners.vnl below")
+        if len(set(rig.sizes.values())) > 1:
+            say("rotstar-detect: the cameras' image sizes differ, so the command gives no --imagersize (it applies "
+                "to every camera): mrcal reads each camera's size from its first image; run it from this folder")
+        say(f"next, calibrate the {len(rig.cameras)} cameras at once with:\n  " + cmd)
     return 0
 
 

@@ -9,6 +9,14 @@ identity frames included unless --no-identity, as a camera at a random pose
 sees the screen), seq/truth.cameramodel and
 seq/truth.json (the poses and the true corner projections). Progress goes to
 stderr; stdout gets only the output folder, for piping.
+
+    rotstar-simulate --rig d435 --rgb --out seq/ --poses 24
+
+writes a multi-camera dataset instead (doc/dataset.md): seq/poseNNN/camera-K/
+for every camera K that sees the board (0: left IR, 1: right IR 50 mm to its
+right, 2: the colour camera with --rgb), seq/truth-camera-K.cameramodel (each
+camera's true intrinsics and extrinsics, camera 0 at the origin) and
+seq/truth.json (per pose rt_ref_board and each camera's true corners).
 """
 
 from __future__ import annotations
@@ -30,6 +38,7 @@ from ..simulate.camera import PRESETS, preset_model
 from ..simulate.dataset import Settings, write_dataset
 from ..simulate.poses import default_distance_range, random_poses
 from ..optics import TERMS, LensPSF, Seidel
+from ..simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_dataset
 from ..simulate.screen import exact_frames, png_frames, shown_light
 from .common import EXIT_CODES_HELP, EXIT_FAILED, check_output_path, fail, number_arg, run
 
@@ -107,6 +116,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         metavar="NAME|FILE",
         help=f"camera preset ({', '.join(PRESETS)}) or a .cameramodel file",
     )
+    p.add_argument("--rig", choices=list(RIGS), default=None,
+                   help="simulate a rig of several cameras instead of --camera: "
+                        + "; ".join(f"{k}: {v['description']}" for k, v in RIGS.items())
+                        + ". Writes the multi-camera layout (poseNNN/camera-K/) and truth-camera-K.cameramodel")
+    p.add_argument("--rgb", action="store_true", help="with --rig: add the colour camera (camera 2, grayscale, 8-bit)")
     p.add_argument("--poses", type=int, default=24, help="number of random poses")
     p.add_argument("--seed", type=int, default=0, help="seed of the poses and of the noise")
     p.add_argument("--blur", type=float, default=None,
@@ -176,8 +190,16 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--screen-png needs --pattern DIR")
     if args.seidel is not None and args.blur is not None:
         p.error("--seidel replaces the Gaussian --blur; give one of them")
+    if args.seidel is not None and args.rig:
+        p.error("--seidel is not simulated for a --rig (its cameras have their own Gaussian --blur)")
     if args.blur is None:
         args.blur = 0.0 if args.seidel is not None else 1.0
+    if args.rgb and not args.rig:
+        p.error("--rgb adds the colour camera of a --rig")
+    if args.rig and args.display_offsets:
+        p.error("--display-offsets is not simulated for a --rig")
+    if args.rig and args.camera != p.get_default("camera"):
+        p.error("--camera and --rig exclude each other: the rig defines its cameras")
     if not all(math.isfinite(v) for v in (args.blur, args.noise, args.shot, args.gain, args.black, args.room,
                                           args.max_tilt, *(args.distance or ()), *([args.margin] if args.margin else []))):
         p.error("--blur, --noise, --shot, --gain, --black, --room, --max-tilt, --distance and --margin must be finite")
@@ -245,6 +267,31 @@ def main(argv=None) -> int:
     return run("rotstar-simulate", _main, argv)
 
 
+def settings_of(args) -> Settings:
+    return Settings(supersample=args.supersample, blur_px=args.blur, sampling=args.sampling, room=args.room,
+                    gain=args.gain, black=args.black, noise=args.noise, shot=args.shot, bits=args.bits,
+                    value_bits=args.value_bits, seed=args.seed)
+
+
+def _rig(args, layout, frames, cams, distance, say, gammas: dict) -> int:
+    """--rig: the board poses drawn for camera 0, each camera rendering those it sees"""
+    rt, seen = rig_poses(cams, layout, args.poses, np.random.default_rng([0, args.seed]), distance=distance,
+                         max_tilt_deg=args.max_tilt, margin_px=args.margin)
+    for k, c in enumerate(cams):
+        W, H = (int(v) for v in c.model.imagersize())
+        say(f"camera-{k} ({c.role}, {W}x{H}): sees {int(seen[:, k].sum())} of {len(rt)} poses")
+    write_rig_dataset(args.out, layout, cams, rt, seen, settings_of(args), frames=frames, jobs=args.jobs,
+                      progress=say, extra={"rig": args.rig, "rgb": args.rgb, "screen": "png" if args.screen_png
+                                           else "exact", "distance_m": list(distance),
+                                           "max_tilt_deg": args.max_tilt, "margin_px": args.margin, **gammas})
+    thin = [k for k in range(len(cams)) if seen[:, k].sum() < 2]
+    print(args.out)
+    if thin:
+        say(f"warning: camera-{thin[0]} sees fewer than 2 poses; mrcal needs at least 2 per camera (more --poses)")
+        return EXIT_FAILED
+    return 0
+
+
 def _main(argv=None) -> int:
     args = parse_args(argv)
 
@@ -260,7 +307,11 @@ def _main(argv=None) -> int:
                 layout = dataclasses.replace(layout, identity=False)
         else:
             layout = make_layout(identity=args.identity, **(PAPER_SEQUENCE if args.paper_sequence else {}))
-        model, camera = load_camera(args.camera)
+        if args.rig:
+            cams = rig_cameras(args.rig, args.seed, args.rgb, args.blur)
+            model, camera = cams[0].model, f"{args.rig} rig camera 0"
+        else:
+            model, camera = load_camera(args.camera)
         check_output_path(args.out, folder=True)
         if args.pattern and os.path.realpath(args.out) == os.path.realpath(
                 args.pattern if os.path.isdir(args.pattern) else os.path.dirname(args.pattern) or "."):
@@ -271,11 +322,15 @@ def _main(argv=None) -> int:
         fail(str(e))
     try:
         frames = screen_frames(args, layout, encoded)
+        gammas = {"display_gamma": encoded,
+                  "screen_gamma": args.screen_gamma if args.screen_gamma is not None else encoded}
         distance = tuple(args.distance) if args.distance else default_distance_range(model, layout)
         say(
             f"{args.poses} poses of a {layout.nx}x{layout.ny} grid ({len(frames)} frames each), camera {camera} "
             f"{model.imagersize()[0]}x{model.imagersize()[1]}, {distance[0]:.3g}-{distance[1]:.3g} m"
         )
+        if args.rig:
+            return _rig(args, layout, frames, cams, distance, say, gammas)
         rts = random_poses(
             model,
             layout,
@@ -312,8 +367,7 @@ def _main(argv=None) -> int:
             extra={
                 "camera": camera,
                 "screen": "png" if args.screen_png else "exact",
-                "display_gamma": encoded,
-                "screen_gamma": args.screen_gamma if args.screen_gamma is not None else encoded,
+                **gammas,
                 "distance_m": list(distance),
                 "max_tilt_deg": args.max_tilt,
                 "margin_px": args.margin if args.margin is not None else 0.02 * float(model.imagersize()[0]),

@@ -10,8 +10,8 @@ SYNOPSIS
 
 `experiment` writes into --out: table.md and table.json (every
 configuration, pattern and refiner, and the means over the tilts),
-summary.md (the means, the three findings' verdicts computed from them, the
-wall time), range_noise<N>.png (pairwise-distance range against the tilt,
+summary.md (the means, the three findings' verdicts computed from them, our
+observation on phase shifting, the pattern x refiner grid, the wall time), range_noise<N>.png (pairwise-distance range against the tilt,
 one per noise level), psf.png, views.png, protocol.json, and cache/ (one
 file per configuration: rerunning resumes). Progress goes to stderr; stdout
 gets only the output folder.
@@ -48,7 +48,7 @@ def _amplitudes(items):
 def parse_args(argv=None) -> argparse.Namespace:
     from ..synth.experiment import ABERRATIONS, Protocol
     from ..synth.patterns import PATTERNS
-    from ..methods import REFINERS
+    from ..synth.refiners import REFINERS
 
     d = Protocol()
     p = argparse.ArgumentParser(prog="rotstar-synth", description=__doc__.split("\n\n")[0].split(": ", 1)[1],
@@ -77,8 +77,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         q.add_argument("--phi", nargs="+", type=float, default=list(d.phis_deg), help="tilts, degrees")
         q.add_argument("--alpha", nargs="+", type=float, default=list(d.alphas_deg), help="tilt-axis directions")
         q.add_argument("--repeats", type=number_arg(int, 1), default=d.repeats)
-        q.add_argument("--patterns", nargs="+", choices=PATTERNS, default=list(d.patterns))
-        q.add_argument("--refiners", nargs="+", choices=sorted(REFINERS), default=list(d.refiners))
+        q.add_argument("--patterns", nargs="+", choices=PATTERNS, default=list(d.patterns),
+                       help="phase: 4-step fringes along x and y (period --phase-period)")
+        q.add_argument("--refiners", nargs="+", choices=sorted(REFINERS), default=list(d.refiners),
+                       help="each runs on the patterns it applies to: phase on the phase pattern, "
+                       "the others on the stars (the other cells are n/a)")
+        q.add_argument("--phase-period", type=float, default=d.phase_period,
+                       help="fringe period of the phase pattern, px at the head-on view")
         q.add_argument("--perturb", type=float, default=d.perturb, help="start = truth + U(-p, p) in x and y, px")
         q.add_argument("--seed", type=int, default=d.seed)
 
@@ -117,7 +122,10 @@ def protocol_from(args, given: set):
               optics=Optics(args.wavelength_um, args.fnumber, args.pixel_um),
               supersample=args.supersample, window=args.window)
     if hasattr(args, "repeats"):
-        kw.update(patterns=tuple(args.patterns), refiners=tuple(args.refiners), perturb=args.perturb, seed=args.seed)
+        if not args.phase_period > 0:
+            fail(f"--phase-period must be positive, not {args.phase_period:g}")
+        kw.update(patterns=tuple(args.patterns), refiners=tuple(args.refiners), perturb=args.perturb, seed=args.seed,
+                  phase_period=args.phase_period)
         # with --quick only the options given explicitly override the quick settings
         for opt, field, conv in (("noise", "noises", _floats), ("phi", "phis_deg", _ints_or_floats),
                                  ("alpha", "alphas_deg", _ints_or_floats), ("repeats", "repeats", int)):
@@ -158,9 +166,17 @@ def cmd_experiment(args, given) -> int:
 
     matplotlib.use("Agg")
     from ..synth import plots, table, verdicts
+    from ..synth.refiners import applies
     from ..synth.sweep import pending_tasks, run_sweep
 
     protocol = protocol_from(args, given)
+    pairs = sum(applies(a, r) for a in protocol.patterns for r in protocol.refiners)
+    if not pairs:
+        fail(f"no refiner of --refiners ({', '.join(protocol.refiners)}) applies to a pattern of --patterns "
+             f"({', '.join(protocol.patterns)}): phase refines only the phase pattern, the others only the stars")
+    alone = [a for a in protocol.patterns if not any(applies(a, r) for r in protocol.refiners)]
+    if alone:
+        say(f"rotstar-synth: no refiner of --refiners applies to {', '.join(alone)}: n/a")
     out = args.out
     check_output_path(out, folder=True)
     cache = args.cache or os.path.join(out, "cache")
@@ -171,7 +187,7 @@ def cmd_experiment(args, given) -> int:
     n_conf = len(protocol.aberrations) * len(protocol.noises) * len(protocol.phis_deg)
     where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{args.jobs} local process(es)"
     say(f"rotstar-synth: {n_conf} configurations ({len(protocol.alphas_deg)} views x {protocol.repeats} repeats "
-        f"x {len(protocol.patterns)} patterns x {len(protocol.refiners)} refiners each); "
+        f"x {pairs} pattern-refiner pairs that apply each); "
         f"{'all' if todo is None else sum(len(t[2]) for t in todo)} to compute on {where}; cache {cache}")
     results = run_sweep(protocol, cache, jobs=args.jobs, scheduler=args.scheduler, progress=Bar())
     wall = time.monotonic() - t0
@@ -220,8 +236,10 @@ def summary_markdown(protocol, mean_rows, vs, wall, args, figures) -> str:
         f"Protocol: aberrations {', '.join(p.aberrations)}; noise sigma_n {', '.join(f'{n:g}' for n in p.noises)} DN "
         f"(contrast {p.contrast:g} DN); tilts phi {', '.join(f'{x:g}' for x in p.phis_deg)} deg; "
         f"{len(p.alphas_deg)} axis directions alpha; {p.repeats} repeats; half-window {p.window} px for every refiner "
-        f"and the bound; starts = truth + U(-{p.perturb:g}, {p.perturb:g}) px; {p.captures} exposures per pattern; "
-        f"{p.supersample}x{p.supersample} sub-pixels; optics F/{p.optics.fnumber:g}, "
+        f"but phase (3 px, the paper's) and for the bound; starts = truth + U(-{p.perturb:g}, {p.perturb:g}) px "
+        f"(phase: the rotating star's symmetric corner); {p.captures} exposures per pattern; "
+        f"{p.supersample}x{p.supersample} sub-pixels; phase fringe period {p.phase_period:g} px head-on; "
+        f"optics F/{p.optics.fnumber:g}, "
         f"{p.optics.pixel_um:g} um pixels, {p.optics.wavelength_um:g} um. PSFs: "
         + "; ".join(f"{a}: {_psf_text(p.psf_spec(a))}" for a in p.aberrations) + ".",
         "",
@@ -230,6 +248,17 @@ def summary_markdown(protocol, mean_rows, vs, wall, args, figures) -> str:
         "Verdicts computed from the table below by rotstar_mrcal.synth.verdicts (thresholds in its docstring).",
         "",
         verdicts.markdown(vs),
+        verdicts.observation_markdown(verdicts.phase_observation(mean_rows)),
+        "## Pattern x refiner: mean range over the tilts (px)",
+        "",
+        "Each refiner runs on the patterns it applies to: the phase refiner (detect.phase, planes in the paper's "
+        "7 x 7 px, started from the rotating star's symmetric corner as in the paper "
+        + ("" if "rotstar" in p.patterns and "symmetric" in p.refiners else
+           "where the run has it; this run has not, so from the common start")
+        + ") on the phase pattern only, "
+        "the wedge refiners on the stars only; n/a: does not apply. fails: more than half of the detections failed.",
+        "",
+    ] + [f"sigma_n = {n:g} DN:\n\n" + table.grid(mean_rows, n) for n in p.noises] + [
         "## Means over the tilts",
         "",
         "range = mean pairwise-distance range (the paper's metric); rms = 2-D RMS error against the truth; "
@@ -275,11 +304,12 @@ def cmd_bound(args, given) -> int:
     from ..synth.bound import pattern_bounds
 
     print(f"# per-axis CRLB std (px), contrast 200 DN, sigma_n {args.noise:g} DN, half-window {args.window}, head-on")
-    print("# sigma_b  checkerboard  closed_form  rotstar_8_frames  star16")
+    print("# sigma_b  checkerboard  closed_form  rotstar_8_frames  star16  phase_8_frames")
     for sb in args.sigmas:
         b = pattern_bounds(gaussian_psf(sb, args.supersample), args.supersample, args.window, 200.0, args.noise)
         cf = closed_form_corner_bound(args.noise, 200.0, sb, args.window)
-        print(f"{sb:8g} {b['checkerboard']:13.4f} {cf:12.4f} {b['rotstar']:17.4f} {b['star16']:7.4f}")
+        print(f"{sb:8g} {b['checkerboard']:13.4f} {cf:12.4f} {b['rotstar']:17.4f} {b['star16']:7.4f} "
+              f"{b['phase']:15.4f}")
     return 0
 
 

@@ -15,6 +15,10 @@ Modules, one concept each:
     sets     the corner sets and the truth of each group on disk; mrgingham over all square-board images
     plots    the close-ups of one corner at each exposure
 
-The methods are rotstar_mrcal.methods.METHODS with demo=True. See
-doc/validation.md (the demo).
+The pattern is the paper's whole sequence (rotstar-pattern --paper-sequence:
+the rotating star, the phase shifts, the checkerboard, the star); the methods
+are rotstar_mrcal.methods.METHODS with demo=True (rotstar, the checkerboard
+methods, phase, phase-keep and star). rotstar-report turns the run into the
+paper's table by tilt and its claims as verdicts (validate.tilts,
+validate.claims). See doc/validation.md (the demo).
 """

@@ -5,6 +5,7 @@ SYNOPSIS
     results = capture_all(jobs, layout, square, model, rts, rts_square, seed, out, keep_images, methods, log)
     results[("A", 0)].found["4000 us"]["saddle"]     # (corners or None, weights or None, why)
     results[("A", 0)].found["4000 us"]["charuco"]    # OpenCV's ChArUco detector (charuco=True)
+    results[("A", 0)].rejected["4000 us"]["phase"]   # (ny, nx) why each phase corner is missing ('' = found)
     results[("B", 0)].crops                          # close-ups of one corner, per exposure
 
 Per exposure k of pose i of group g, the noise comes from
@@ -13,7 +14,13 @@ then CAPTURES captures of the checkerboard frame and of the square board
 averaged over the screen's part of the image (simulate.captures), then one
 capture of each identity frame, then (charuco=True) CAPTURES captures of the
 ChArUco board of pattern.charuco averaged (the images before it are those of
-a run without it). The square board goes to
+a run without it), then, when the pattern is the paper's sequence
+(rotstar-pattern --paper-sequence), one capture of each phase-shift frame
+(as the rotating star) and CAPTURES captures of the star frame averaged (as
+the checkerboard: the paper's same-photons rule). The screen shows frames
+encoded for a display gamma of PATTERN_GAMMA with its own SCREEN_GAMMA
+(simulate.screen.shown_light: 8 bits, a mismatch that bends the phase
+shifts' sinusoids and leaves the binary frames alone). The square board goes to
 <exposure>/<g>-square/poseNNN/checkerboard.png as 8 bits, for mrgingham;
 with keep_images every frame of the sequence is written as a rotstar dataset.
 """
@@ -27,7 +34,7 @@ import time
 import numpy as np
 
 from ..parallel import process_map
-from .scene import CAPTURES, EXPOSURES, NOISE, SHOT, coma_psf, exposure_dir
+from .scene import CAPTURES, EXPOSURES, NOISE, PATTERN_GAMMA, SCREEN_GAMMA, SHOT, coma_psf, exposure_dir
 
 
 @dataclasses.dataclass
@@ -50,6 +57,7 @@ class PoseResult:
     found: dict  # exposure label -> method -> (corners or None, weights or None, why)
     crops: dict  # exposure label -> (rotating-star crop, checkerboard crop), pose 0 only
     seconds: float
+    rejected: dict = dataclasses.field(default_factory=dict)  # label -> method -> (ny, nx) reasons, '' = found
 
 
 _W: dict = {}  # the worker's layouts, model, rays, PSF and screens (init_worker)
@@ -61,17 +69,19 @@ def init_worker(layout, square, model_args, rays, charuco: bool = False) -> None
 
     from .. import simulate
     from ..pattern.charuco import render_charuco
+    from ..simulate.screen import shown_light
 
     cv2.setNumThreads(1)
     model = mrcal.cameramodel(intrinsics=model_args[0], imagersize=model_args[1])
     simulate.camera.remember_rays(model, rays)
     cb = [f for f in square.frames() if f["kind"] == "checkerboard"]
-    frames = simulate.exact_frames(layout)  # layout.frames(): rotating-star, identity, checkerboard
+    frames = simulate.exact_frames(layout)  # layout.frames(): rotating-star, identity, (phase), checkerboard, (star)
     if charuco:
         frames = np.concatenate((frames, render_charuco(layout)[None].astype(np.float32)))
     _W.update(layout=layout, square=square, model=model, rays=rays, psf=coma_psf(model.imagersize()),
-              screen=simulate.make_screen(frames, layout),
-              screen_square=simulate.make_screen(simulate.exact_frames(square, cb), square))
+              screen=simulate.make_screen(shown_light(frames, PATTERN_GAMMA, SCREEN_GAMMA), layout),
+              screen_square=simulate.make_screen(shown_light(simulate.exact_frames(square, cb), PATTERN_GAMMA,
+                                                             SCREEN_GAMMA), square))
 
 
 def capture_pose(job: Job) -> PoseResult:
@@ -92,7 +102,7 @@ def capture_pose(job: Job) -> PoseResult:
     kinds = np.array([f["kind"] for f in layout.frames()])
     Es = simulate.render_irradiance(_W["screen_square"], model, job.rt_square, **kw)[0]
     pose = f"pose{job.index:03d}"
-    results, crops = {}, {}
+    results, crops, rejected = {}, {}, {}
     truth = simulate.true_corners(model, layout, job.rt)
     for k, (label, gain) in enumerate(EXPOSURES):
         rng = np.random.default_rng([job.seed, ord(job.group), job.index, k])
@@ -105,10 +115,16 @@ def capture_pose(job: Job) -> PoseResult:
         cb = averaged_captures(Ec, expose, CAPTURES, roi=lit_box(Ec))
         sq = averaged_captures(Es, expose, CAPTURES, roi=lit_box(Es))
         ident = expose(E[kinds == "identity"]) if layout.identity else None  # (last: the others' noise as before)
-        found = detect_methods(rot, layout, 65535.0, cb, job.methods, identity=ident)
+        ch = averaged_captures(Ech, expose, CAPTURES, roi=lit_box(Ech)) if job.charuco else None
+        # the paper's sequence: one capture of each phase shift (as the rotating star), the star averaged
+        phase = expose(E[kinds == "phase"]).reshape(2, -1, *E.shape[1:]) if layout.phase else None
+        Est = E[np.flatnonzero(kinds == "star")[0]] if layout.star_segments else None
+        star = averaged_captures(Est, expose, CAPTURES, roi=lit_box(Est)) if layout.star_segments else None
+        found = detect_methods(rot, layout, 65535.0, cb, job.methods, identity=ident, phase=phase, star=star)
         results[label] = {m: (f.corners, f.weights, f.why) for m, f in found.items()}
+        rejected[label] = {m: f.reasons for m, f in found.items() if f.reasons is not None}
         if job.charuco:
-            c = detect_charuco(averaged_captures(Ech, expose, CAPTURES, roi=lit_box(Ech)), layout, 65535.0)
+            c = detect_charuco(ch, layout, 65535.0)
             ok = np.isfinite(c).all(axis=-1).any()
             results[label]["charuco"] = (c if ok else None, None, "" if ok else "ChArUco found no corner")
         edir = exposure_dir(job.out, label)
@@ -117,7 +133,9 @@ def capture_pose(job: Job) -> PoseResult:
         cv2.imwrite(os.path.join(sqdir, "checkerboard.png"), np.clip(np.round(sq / 257.0), 0, 255).astype(np.uint8))
         if job.keep_images:
             imgs = {"rotstar": iter(rot), "identity": iter(() if ident is None else ident),
-                    "checkerboard": iter([np.round(cb).astype(np.uint16)])}
+                    "checkerboard": iter([np.round(cb).astype(np.uint16)]),
+                    "phase": iter(() if phase is None else phase.reshape(-1, *E.shape[1:])),
+                    "star": iter(() if star is None else [np.round(star).astype(np.uint16)])}
             dataset.write_pose(os.path.join(edir, job.group), pose,
                                {f["file"]: next(imgs[f["kind"]]) for f in layout.frames()})
         if job.index == 0:  # close-ups for the report: the corner nearest an image corner
@@ -126,7 +144,7 @@ def capture_pose(job: Job) -> PoseResult:
             x, y = np.round(truth[j, i]).astype(int)
             r = 20
             crops[label] = (rot[1, y - r:y + r + 1, x - r:x + r + 1], cb[y - r:y + r + 1, x - r:x + r + 1])
-    return PoseResult(job.group, job.index, results, crops, time.perf_counter() - t0)
+    return PoseResult(job.group, job.index, results, crops, time.perf_counter() - t0, rejected)
 
 
 def capture_all(jobs: int, layout, square, model, rts: dict, rts_square: dict, seed: int, out: str,

@@ -14,7 +14,9 @@ Seidel coma growing linearly with the field radius (COMA_WAVES at the image
 corners, its centroid put back on the chief ray by an equal and opposite
 tilt, so the true model is where the light's centroid lands), plus field
 curvature (FOCUS_WAVES x h^2) and diffraction at F/2 with 3 um pixels. The
-screen: the default layout (iPad 2360x1640, 14 x 9 corners).
+screen: the default layout (iPad 2360x1640, 14 x 9 corners) with the paper's
+whole sequence, its 8-bit frames encoded for a display gamma of
+PATTERN_GAMMA and shown with the screen's SCREEN_GAMMA.
 
 The experiment (paper 4.2): two groups of poses, each the iPad turned about
 a fixed axis in 30-degree steps from 0 to 60 degrees (the paper: 10-degree
@@ -37,7 +39,9 @@ FOCUS_WAVES = 0.3  # field curvature: defocus at the image corners, waves
 EXPOSURES = (("2000 us", 0.35), ("4000 us", 0.7), ("8000 us (saturated)", 1.4))
 NOISE = 0.01  # read noise, fraction of full scale
 SHOT = 1e-4  # shot noise variance per unit signal (a 10000 e- full well)
-CAPTURES = 8  # checkerboard captures averaged
+CAPTURES = 8  # checkerboard (and star) captures averaged
+PATTERN_GAMMA = 2.2  # the display gamma rotstar-pattern encodes its frames for
+SCREEN_GAMMA = 2.4  # the screen's own: a modest mismatch (simulate.screen.shown_light)
 TILTS = (0, 30, 60)
 LENSMODEL = "LENSMODEL_OPENCV5"
 SQUARE_N = 9  # mrgingham's board
@@ -113,8 +117,11 @@ def setup_notes(npose, reach) -> str:
     """The report's set-up section (Markdown)"""
     return f"""\
 Simulated Intel RealSense D435 infrared camera (1280x800 Y16, `OPENCV8` lens with fx = 640) looking at an
-iPad (2360x1640, 264 ppi) showing the rotating-star sequence (14 x 9 corners, 8 frames), the 13 identity
-frames and a checkerboard.
+iPad (2360x1640, 264 ppi) showing the paper's whole sequence (`rotstar-pattern --paper-sequence`): the
+rotating star (14 x 9 corners, 8 frames), the 13 identity frames, 4-step phase shifts along x and y
+(8 frames), a checkerboard and the 16-segment star of Schops et al. The frames are 8-bit, encoded for a
+display gamma of {PATTERN_GAMMA}; the screen's own gamma is {SCREEN_GAMMA} (a modest mismatch: it bends the
+phase shifts' sinusoids, the binary frames do not notice).
 The lens has a wavefront PSF (rotstar_mrcal.optics): coma growing with the field radius to {COMA_WAVES} waves
 at the image corners (a comet about {3 * 2 * 0.367 * COMA_WAVES:.1f} px long there; its centroid is kept on the
 chief ray, so the true model is where the light's centroid lands), field curvature ({FOCUS_WAVES} waves of
@@ -127,8 +134,34 @@ to 60 degrees (the paper: 10-degree steps), at three places in the field of view
 90% of its corners lie within {reach['B']:.0f} px of the image centre, against {reach['A']:.0f} px for A.
 Three exposures (gains 0.35, 0.7 and 1.4 of full scale for white; the last saturates the white).
 Each method detects its own corners on the same poses: rotstar on the 8 rotating-star frames and the 13
-identity frames (one capture each); the checkerboard methods on the checkerboard frame averaged over 8 captures; mrgingham on a square
-9 x 9 checkerboard seen from the same poses. Every corner set is calibrated with mrcal
+identity frames (one capture each); phase shifting on the 8 phase-shift frames (one capture each), from
+rotstar's corners (`phase` rejects a corner whose window holds a clipped value, `phase-keep` fits the
+clipped values as the paper's pipeline does); the star (the symmetric refinement on the one star frame,
+from rotstar's corners) and the checkerboard methods on their frame averaged over 8 captures (the same
+photons as the 8 rotating-star frames); mrgingham on a square 9 x 9 checkerboard seen from the same poses. Every corner set is calibrated with mrcal
 (`{LENSMODEL}`: the true lens has no rational terms, and the splined model needs more poses than a group
 has) on group A and on group B.
 """
+
+
+def rejection_notes(rejected: dict) -> str:
+    """The report's line on the corners a method rejected, per exposure (Markdown; '' if none)
+
+    rejected: {exposure label: per pose {method: (ny, nx) reasons, '' = found}}.
+
+    >>> r = np.array([["", "saturated: a sample at full scale"], ["", ""]], dtype=object)
+    >>> print(rejection_notes({"2000 us": [{"phase": r}, {"phase": r}]}))
+    <BLANKLINE>
+    Corners rejected: phase at 2000 us: 2 of 8 (2 saturated: a sample at full scale).
+    <BLANKLINE>
+    """
+    from ..methods import reason_counts
+
+    parts = []
+    for label, per_pose in rejected.items():
+        for m in dict.fromkeys(k for p in per_pose for k in p):
+            r = np.concatenate([np.asarray(p[m], dtype=object).ravel() for p in per_pose if m in p])
+            n = int(sum(bool(x) for x in r))
+            if n:
+                parts.append(f"{m} at {label}: {n} of {r.size} ({reason_counts(r)})")
+    return "\nCorners rejected: " + "; ".join(parts) + ".\n" if parts else ""

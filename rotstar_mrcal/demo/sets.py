@@ -21,6 +21,10 @@ import time
 from ..methods import METHODS
 from .scene import EXPOSURES, SQUARE_N, exposure_dir
 
+# the image a method's corners of one pose are written against, by what it needs
+FIRST_FILE = {"rotstar": "rotstar_00.png", "checkerboard": "checkerboard.png", "phase": "phase_x_0.png",
+              "star": "star.png"}
+
 
 def write_group(edir, group, layout, model, rts, corners_by_method, square, rts_square) -> dict[str, str]:
     """edir/<group>/: pattern.json, truth.*, <method>.vnl; edir/<group>-square/: the same truth; {method: vnl}
@@ -43,8 +47,7 @@ def write_group(edir, group, layout, model, rts, corners_by_method, square, rts_
     vnls = {}
     seq = os.path.join(edir, group)
     for m, per_pose in corners_by_method.items():
-        first = "charuco.png" if m == "charuco" else "rotstar_00.png" if METHODS[m].needs == "rotstar" \
-            else "checkerboard.png"
+        first = "charuco.png" if m == "charuco" else FIRST_FILE[METHODS[m].needs]
         boards = [(f"pose{i:03d}/{first}", c) for i, (c, w) in enumerate(per_pose)]
         weights = [w for c, w in per_pose] if m in METHODS and METHODS[m].variant_of else None
         vnls[m] = os.path.join(seq, f"{m}.vnl")

@@ -72,34 +72,65 @@ def predict_from_neighbours(labels: np.ndarray, points: np.ndarray, active: np.n
     return coef[:, 2, :], step
 
 
+def drop_worst(n: int, offsets, tolerance: float, why_off, why_lonely, min_kept: int = 1):
+    """(ok (n,), reason (n,)): drop the worst offender, measure again, until every kept one is within tolerance
+
+    offsets(ok) -> (off, rank): (n,) offsets of the kept elements (NaN: too
+    few neighbours to measure; ignored where not ok) and the (n,) values by
+    which the worst is chosen (largest first); why_off(k, off, rank) the
+    reason of a dropped one. At the end the unmeasurable are dropped with
+    why_lonely; with fewer than min_kept left, all are.
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> x = np.array([0.0, 1.0, 2.0, 9.0, 4.0])     # one outlier among points on a line
+        >>> def offsets(ok):                           # distance from the mean of the others kept
+        ...     off = np.array([abs(x[k] - x[ok & (np.arange(5) != k)].mean()) for k in range(5)])
+        ...     return off, off
+        >>> ok, why = drop_worst(5, offsets, 3.5, lambda k, o, r: f"{o[k]:.1f} off", "alone")
+        >>> ok.tolist(), why[3]
+        ([True, True, True, False, True], '7.2 off')
+    """
+    ok = np.ones(n, bool)
+    reason = np.full(n, "", dtype=object)
+    off = np.full(n, np.nan)
+    while ok.sum() >= min_kept and ok.any():
+        off, rank = offsets(ok)
+        bad = ok & np.isfinite(off) & (off > tolerance)
+        if not bad.any():
+            lonely = ok & ~np.isfinite(off)
+            ok[lonely] = False
+            reason[lonely] = why_lonely
+            return ok, reason
+        worst = int(np.flatnonzero(bad)[np.argmax(rank[bad])])
+        ok[worst] = False
+        reason[worst] = why_off(worst, off, rank)
+    reason[ok] = why_lonely
+    ok[:] = False
+    return ok, reason
+
+
 def label_consistency(labels: np.ndarray, points: np.ndarray, tolerance: float = TOLERANCE):
     """(ok (N,), reason (N,)): which labelled elements agree with their neighbours; see the module doc
 
     labels: (N, 2) distinct (i, j); points: (N, 2) image positions of the corners.
+    The farthest in pixels is dropped first: a wrong neighbour also shrinks
+    the step its neighbours are judged by.
     """
     labels = np.asarray(labels, int)
     points = np.asarray(points, float)
-    N = len(labels)
-    reason = np.full(N, "", dtype=object)
-    active = np.ones(N, bool)
-    if N == 0:
-        return active, reason
-    while True:
-        pred, step = predict_from_neighbours(labels, points, active)
+
+    def offsets(ok):
+        pred, step = predict_from_neighbours(labels, points, ok)
         dist = np.linalg.norm(points - pred, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            off = dist / step
-        bad = active & np.isfinite(off) & (off > tolerance)
-        if not bad.any():
-            break
-        # the farthest in pixels first: a wrong neighbour also shrinks the step its neighbours are judged by
-        worst = int(np.flatnonzero(bad)[np.argmax(dist[bad])])
-        active[worst] = False
-        reason[worst] = f"identity disagrees with its neighbours ({dist[worst]:.0f} px from where they put it)"
-    lonely = active & ~np.isfinite(off)
-    reason[lonely] = "too few identified neighbours to check its identity against"
-    active &= ~lonely
-    return active, reason
+            return dist / step, dist
+
+    return drop_worst(len(labels), offsets, tolerance,
+                      lambda k, off, dist: f"identity disagrees with its neighbours ({dist[k]:.0f} px from where "
+                                           "they put it)",
+                      "too few identified neighbours to check its identity against")
 
 
 def projective_offsets(labels: np.ndarray, points: np.ndarray, radius: int = 2) -> np.ndarray:
@@ -149,20 +180,12 @@ def refined_consistency(labels: np.ndarray, points: np.ndarray, tolerance: float
     """
     labels = np.asarray(labels, int)
     points = np.asarray(points, float)
-    ok = np.ones(len(labels), bool)
-    reason = np.full(len(labels), "", dtype=object)
-    while ok.sum() >= 6:
-        idx = np.flatnonzero(ok)
-        off = projective_offsets(labels[idx], points[idx])
-        bad = np.isfinite(off) & (off > tolerance)
-        if not bad.any():
-            lonely = idx[~np.isfinite(off)]
-            ok[lonely] = False
-            reason[lonely] = "too few refined neighbours to check its corner against"
-            return ok, reason
-        worst = idx[np.flatnonzero(bad)[np.argmax(off[bad])]]
-        ok[worst] = False
-        reason[worst] = f"corner off the homography of its neighbours by {off[idx == worst][0]:.2f} grid steps"
-    reason[ok] = "too few refined neighbours to check its corner against"
-    ok[:] = False
-    return ok, reason
+
+    def offsets(ok):
+        off = np.full(len(labels), np.nan)
+        off[ok] = projective_offsets(labels[ok], points[ok])
+        return off, off
+
+    return drop_worst(len(labels), offsets, tolerance,
+                      lambda k, off, _: f"corner off the homography of its neighbours by {off[k]:.2f} grid steps",
+                      "too few refined neighbours to check its corner against", min_kept=6)

@@ -44,6 +44,8 @@ import numpy as np
 
 MIN_POSES = 3
 MAX_MOTION = 0.15  # px: frames that moved more against each other than this mean a moving camera
+MIN_OFFSET = 0.05  # display px: smaller offsets are reported as none
+NOISE_FACTOR = 4.0  # offsets within this many standard errors of zero are reported as none
 
 
 @dataclasses.dataclass
@@ -115,6 +117,21 @@ class DisplayCheck:
     offsets: np.ndarray | None  # (nframes, 2) display px, median over poses; None with too few poses
     motion_px: dict  # pose -> largest frame-to-frame shift not explained by the display, camera px
     poses: int  # how many poses the offsets come from
+    noise: float = 0.0  # standard error of one offset component, display px (from the poses' spread)
+
+    def significant(self) -> bool:
+        """Whether the offsets stand out of their own noise (and exceed MIN_OFFSET display px)
+
+        SYNOPSIS
+
+            >>> c = DisplayCheck(np.array([[0.06, 0.0], [-0.06, 0.0]]), {}, 10, noise=0.02)
+            >>> c.significant(), dataclasses.replace(c, noise=0.005).significant()
+            (False, True)
+        """
+        if self.offsets is None:
+            return False
+        mag = float(np.linalg.norm(self.offsets, axis=1).max())
+        return mag >= max(MIN_OFFSET, NOISE_FACTOR * self.noise)
 
     def moved(self, max_motion: float = MAX_MOTION) -> list[str]:
         """The poses whose frames moved against each other by more than max_motion px"""
@@ -125,8 +142,9 @@ class DisplayCheck:
             return (f"display offsets not separable from camera motion with {self.poses} pose(s) "
                     f"(need {MIN_POSES}); only rotation and scale between frames are checked")
         mag = np.linalg.norm(self.offsets, axis=1)
-        if mag.max() < 0.05:
-            return f"display offsets: none (largest {mag.max():.3f} display px over {self.poses} poses)"
+        if not self.significant():
+            return (f"display offsets: none (largest {mag.max():.3f} display px over {self.poses} poses; "
+                    f"the estimate's noise {self.noise:.3f})")
         frames = " ".join(f"({x:+.2f},{y:+.2f})" for x, y in self.offsets)
         return (f"display offsets (display px, per frame, the same in all {self.poses} poses): {frames}; "
                 "a pixel-exact player shows none: check the player and the screen's scaling")
@@ -142,7 +160,11 @@ def dataset_offsets(shifts: dict) -> DisplayCheck:
     good = {p: s for p, s in shifts.items() if np.isfinite(s.px_per_display)}
     if len(good) < MIN_POSES:
         return DisplayCheck(None, {p: s.residual_px for p, s in shifts.items()}, len(good))
-    med = np.median(np.stack([s.offsets for s in good.values()]), axis=0)
+    every = np.stack([s.offsets for s in good.values()])
+    med = np.median(every, axis=0)
+    # the median's standard error, from the poses' robust spread about it (pooled over frames and axes)
+    sigma = 1.4826 * float(np.median(np.abs(every - med)))
+    noise = 1.2533 * sigma / np.sqrt(len(good))
     motion = {}
     for p, s in shifts.items():
         if not np.isfinite(s.px_per_display):
@@ -151,4 +173,4 @@ def dataset_offsets(shifts: dict) -> DisplayCheck:
         dev = (s.offsets - med) * s.px_per_display
         between = float(np.linalg.norm(dev[:, None] - dev[None], axis=-1).max())
         motion[p] = max(between, s.residual_px)
-    return DisplayCheck(med, motion, len(good))
+    return DisplayCheck(med, motion, len(good), noise)

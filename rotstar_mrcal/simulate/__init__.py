@@ -25,6 +25,7 @@ Modules, one concept each:
               boards hanging over the image's edges (partial views)
     visibility  which corners a detector can report: true refinement windows, in view
     dataset   write a dataset + truth.json/truth.cameramodel; load the truth
+    rig       several cameras (a D435's infrared pair and colour camera): poses, dataset, truth
 
 See doc/simulator.md.
 """

@@ -15,16 +15,18 @@ SYNOPSIS
 
 Modules, one concept each:
 
-    patterns   the checkerboard, rotating-star and 16-segment-star corners as wedges
+    patterns   the checkerboard, rotating-star and 16-segment-star corners as wedges,
+               the phase shifts as fringes
     views      the poses: a tilt phi about an in-plane axis at angle alpha
     render     exact sub-pixel coverage, PSF convolution, block summation; the
                pixel-integrated gradients for the Cramer-Rao bound
-    refiners   OpenCV cornerSubPix, the saddle fit, the symmetric refinement (Eq. 1)
+    refiners   OpenCV cornerSubPix, the saddle fit, the symmetric refinement (Eq. 1),
+               the phase-shift corner (detect.phase); which applies to which pattern
     metrics    pairwise-distance range, RMS error, failure rate
     experiment the protocol and one task: render, expose, refine
     sweep      run the configurations on local processes or Dask, cached
     table      rows per configuration and their means over the tilts
-    verdicts   the paper's three findings, decided from the table
+    verdicts   the paper's three findings, decided from the table; our phase observation
     bound      the CRLB of each pattern for one PSF
     plots      figures (range against tilt, PSFs, what the refiners see)
 
@@ -34,16 +36,16 @@ The command line is rotstar-synth (rotstar_mrcal.cli.synth); see doc/optics.md.
 from . import verdicts
 from .experiment import ABERRATIONS, SYMMETRIC, Protocol, psf_kernel, quick_protocol, render_views, run_task
 from .metrics import failure_rate, pairwise_range, rms_error
-from .patterns import PATTERNS, Star, pattern_frames
-from .refiners import REFINERS, refine
+from .patterns import PATTERNS, Fringe, Star, pattern_frames, phase_frames
+from .refiners import REFINERS, applies, refine
 from .sweep import pending_tasks, run_sweep
 from .table import over_tilts, tabulate
 
 __all__ = [
     "ABERRATIONS", "SYMMETRIC", "Protocol", "psf_kernel", "quick_protocol", "render_views", "run_task",
     "failure_rate", "pairwise_range", "rms_error",
-    "PATTERNS", "Star", "pattern_frames",
-    "REFINERS", "refine",
+    "PATTERNS", "Fringe", "Star", "pattern_frames", "phase_frames",
+    "REFINERS", "applies", "refine",
     "pending_tasks", "run_sweep",
     "over_tilts", "tabulate",
 ]

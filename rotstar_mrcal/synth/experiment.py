@@ -19,16 +19,27 @@ for each noise level and each of `repeats` repetitions, every frame is
 exposed with independent Gaussian noise and every refiner (refiners.py)
 refines the corner from the truth perturbed by a uniform offset of up to
 `perturb` pixels in x and y (the same start for every pattern and refiner
-of one repeat and view, so the comparisons are paired).
+of one repeat and view, so the comparisons are paired), except the phase
+refiner, which starts from the rotating star's symmetric corner of the same
+repeat and view, as in the paper's real experiment (_phase_starts).
 
 Fairness (the paper's rule): every pattern gets `captures` = 8 exposures.
-The rotating star shows 8 frames, one exposure each; the checkerboard and
-the 16-segment star show one frame, exposed 8 times with independent noise
-and averaged (detect.baselines.average_frames).
+The rotating star and the phase shifts show 8 frames, one exposure each;
+the checkerboard and the 16-segment star show one frame, exposed 8 times
+with independent noise and averaged (detect.baselines.average_frames).
+
+Each refiner runs only on the patterns it applies to (refiners.applies: the
+phase refiner on the phase pattern, the others on the stars); the other
+cells of the detections stay NaN and the table leaves them out ("n/a").
 
 Image values: dark + contrast * (blurred pattern) + N(0, sigma_n^2), in DN
 (default 28 + 200 x, i.e. black 28, white 228), float, no quantisation or
-saturation: the experiment isolates the PSF.
+saturation: the experiment isolates the PSF. What limits the phase shifts
+besides the PSF and the noise is therefore left out: the display's gamma
+(a mismatch makes the fringes non-sinusoidal, and the 4-step phase then
+has a periodic error), saturation of the bright fringes, ambient light and
+the 8-bit quantisation of the screen and the camera (rotstar-simulate and
+the benchmark model those).
 
 The repetitions of all views are tiled side by side into one mosaic per
 pattern (tile T x T, T = 2 window + 10), so each refiner runs once on all
@@ -56,8 +67,8 @@ from ..detect.baselines import average_frames
 from ..optics.crlb import fisher_information
 from ..optics.psf import Optics, gaussian_psf, wavefront_psf
 from ..optics.wavefront import Seidel
-from .patterns import PATTERNS, pattern_frames
-from .refiners import REFINERS, refine
+from .patterns import PATTERNS, PHASE_PERIOD, pattern_frames
+from .refiners import REFINERS, applies, refine
 from .imaging import ViewRenderer
 from .views import ALPHAS_DEG, PHIS_DEG, view_jacobian
 
@@ -83,7 +94,7 @@ class Protocol:
     repeats: int = 50
     patterns: tuple = PATTERNS
     refiners: tuple = tuple(sorted(REFINERS))  # every refiner; alphabetical, the published tables' order
-    window: int = 10  # half-window of every refiner and of the bound
+    window: int = 10  # half-window of every refiner but phase (detect.phase.HALF_WINDOW) and of the bound
     supersample: int = 4
     captures: int = 8
     perturb: float = 1.0
@@ -94,6 +105,7 @@ class Protocol:
     gaussian_sigma: float = 1.5
     amplitudes: tuple = ()  # ((name, waves), ...) overriding ABERRATIONS
     coma_angle_deg: float = 0.0  # direction of the comet's tail in the image
+    phase_period: float = PHASE_PERIOD  # the phase pattern's fringe period, board units (= px head-on)
     optics: Optics = Optics()
     seed: int = 0
 
@@ -180,13 +192,38 @@ def render_views(protocol: Protocol, aberration: str, phi_deg: float):
     for v, alpha in enumerate(p.alphas_deg):
         J = view_jacobian(math.radians(phi_deg), math.radians(alpha), p.field)
         for j, name in enumerate(p.patterns):
-            stars = [st.mapped(J) for st in pattern_frames(name)]
+            stars = [st.mapped(J) for st in pattern_frames(name, p.phase_period)]
             img, grad = renderer(stars, truth)
             frames[name].append(p.dark + p.contrast * img)
             per_frame = p.captures / len(stars)  # exposures averaged into each frame
             g = p.contrast * grad[:, win]  # (K, M, 2)
             fisher[v, j] = per_frame * fisher_information(g.reshape(-1, 2), 1.0)
     return {k: np.stack(v) for k, v in frames.items()}, fisher
+
+
+def _pattern_order(patterns) -> list[int]:
+    """Indices of the patterns, the phase pattern last (it starts from the rotating star's corners)"""
+    return [j for j, n in enumerate(patterns) if n != "phase"] + [j for j, n in enumerate(patterns) if n == "phase"]
+
+
+def _phase_starts(p: Protocol, det: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Starts of the phase refiner (V, R, 2) in mosaic coordinates: the rotating star's symmetric corners
+
+    As in the paper's real experiment ("the initial feature positions are
+    provided by our method"): the phase refiner starts from the corner the
+    symmetric refinement found on the rotating star in the same repeat and
+    view, so a PSF that moves every detection (coma moves it 2-3 px from the
+    paraxial point) does not push the phase-plane solution out of its 7 x 7
+    px window. Where that corner failed, or the protocol lacks the rotating
+    star or the symmetric refinement, the common start (truth + perturbation).
+    """
+    V, R = starts.shape[:2]
+    offs = np.stack((np.arange(V * R) * p.tile, np.zeros(V * R)), axis=-1).reshape(V, R, 2)
+    s = starts
+    if "rotstar" in p.patterns and "symmetric" in p.refiners:
+        q = np.moveaxis(det[:, :, p.patterns.index("rotstar"), p.refiners.index("symmetric")], 0, 1)  # (V, R, 2)
+        s = np.where(np.isfinite(q).all(axis=-1, keepdims=True), q, starts)
+    return s + offs
 
 
 def run_task(protocol: Protocol, aberration: str, phi_deg: float, noises) -> dict:
@@ -206,7 +243,8 @@ def run_task(protocol: Protocol, aberration: str, phi_deg: float, noises) -> dic
     for noise in noises:
         rng = _rng(p.seed, 2, _name_id(aberration), int(round(noise * 1000)), int(round(phi_deg * 1000)))
         det = np.full((R, V, len(p.patterns), len(p.refiners), 2), np.nan, np.float32)
-        for j, name in enumerate(p.patterns):
+        for j in _pattern_order(p.patterns):
+            name = p.patterns[j]
             f = frames[name]  # (V, K, T, T)
             K = f.shape[1]
             mosaic = np.repeat(f[:, None], R, axis=1)  # (V, R, K, T, T)
@@ -217,8 +255,10 @@ def run_task(protocol: Protocol, aberration: str, phi_deg: float, noises) -> dic
                                   for k in range(K)])
             else:
                 noisy = mosaic.astype(np.float32)
-            s0 = (starts + offs).reshape(-1, 2)
+            s0 = (_phase_starts(p, det, starts) if name == "phase" else starts + offs).reshape(-1, 2)
             for i, r in enumerate(p.refiners):
+                if not applies(name, r):
+                    continue  # n/a: stays NaN
                 q = refine(r, noisy, s0, p.window).reshape(V, R, 2) - offs
                 det[:, :, j, i] = np.moveaxis(q, 1, 0)
         out[float(noise)] = {"detections": det, "truth": truth, "fisher": fisher}

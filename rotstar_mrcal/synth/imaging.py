@@ -39,6 +39,15 @@ length of the edge inside the sub-pixel (star_edge_measure, exact). That
 image is convolved and summed like the pattern: the gradient returned is the
 pixel-integrated gradient of the blurred pattern, d mu / d q = -C * grad for
 contrast C. No finite differences of a hard-edged render are involved.
+
+Fringes (patterns.Fringe, the phase pattern) take their own path through
+the same three steps (fringe_subpixel): every sub-pixel holds the exact
+mean of 0.5 + 0.5 cos(k . d + shift) over its square (the sinusoid times
+sinc(k_x h / 2) sinc(k_y h / 2)), and the exact mean of its gradient
+(-0.5 sin(...) k times the same factors); both are convolved with the
+same PSF kernel and block-summed. A PSF shifts a sinusoid's phase by the
+argument of its optical transfer function at k: zero for a point-symmetric
+PSF, not for coma.
 """
 
 from __future__ import annotations
@@ -50,7 +59,7 @@ import numpy as np
 import scipy.fft
 
 from ..simulate.irradiance import block_average
-from .patterns import Star
+from .patterns import Fringe, Star
 
 
 def star_coverage(star: Star, dx: np.ndarray, dy: np.ndarray, h: float, hit=None, theta=None) -> np.ndarray:
@@ -219,6 +228,32 @@ def _edge_measure(star: Star, dx: np.ndarray, dy: np.ndarray, h: float) -> np.nd
     return np.stack((w @ -s, w @ c), axis=-1)
 
 
+def fringe_subpixel(fringe: Fringe, dx: np.ndarray, dy: np.ndarray, h: float):
+    """Exact means of a fringe and of its gradient over squares of side h centred at (dx, dy)
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> from rotstar_mrcal.synth.patterns import Fringe
+        >>> f = Fringe(np.array((2 * np.pi / 4, 0.0)), 0.0)      # period 4
+        >>> v, g = fringe_subpixel(f, np.array([0.0, 1.0]), np.array([0.0, 0.0]), 2.0)
+        >>> np.round(v, 4).tolist(), round(0.5 + 1 / np.pi, 4)   # squares [-1, 1] and [0, 2]
+        ([0.8183, 0.5], 0.8183)
+        >>> (np.round(g[:, 0] * 2, 12) + 0.0).tolist()   # P(1) - P(-1) = 0, P(2) - P(0) = -1
+        [0.0, -1.0]
+
+    Returns (value (...), gradient (..., 2)); the mean of cos(k . d + s)
+    over the square is cos(k . c + s) sinc(k_x h / 2) sinc(k_y h / 2).
+    """
+    dx, dy = np.broadcast_arrays(np.asarray(dx, float), np.asarray(dy, float))
+    kx, ky = (float(v) for v in fringe.k)
+    box = np.sinc(kx * h / (2 * math.pi)) * np.sinc(ky * h / (2 * math.pi))  # numpy's sinc is sin(pi x) / (pi x)
+    a = kx * dx + ky * dy + fringe.shift
+    value = 0.5 + 0.5 * box * np.cos(a)
+    g = -0.5 * box * np.sin(a)
+    return value, np.stack((g * kx, g * ky), axis=-1)
+
+
 class FFTBlur:
     """Convolution of (..., H, W) images with one kernel, its transform computed once
 
@@ -272,7 +307,7 @@ class ViewRenderer:
         ((8, 21, 21), (8, 21, 21, 2))
 
     Calling it returns (images, grads): images (K, T, T) in [0, 1], one per
-    star, apex at `apex` (tile pixel coordinates); grads (K, T, T, 2) the
+    star (or per fringe: a list of patterns.Fringe takes the fringe path), apex at `apex` (tile pixel coordinates); grads (K, T, T, 2) the
     integral over each pixel of grad (PSF * P), so d pixel / d apex = -grads
     for a unit contrast (None with gradient=False).
     """
@@ -289,6 +324,8 @@ class ViewRenderer:
         self._apex = None
 
     def __call__(self, stars, apex, gradient: bool = True):
+        if len(stars) and all(isinstance(f, Fringe) for f in stars):
+            return self._fringes(stars, apex, gradient)
         s, m, T = self.s, self.margin, self.tile
         xs, ys = self.centres - apex[0], self.centres - apex[1]
         if self._apex is None or not np.array_equal(self._apex, apex):
@@ -305,6 +342,18 @@ class ViewRenderer:
         meas = np.stack([star_edge_measure(st, dx, dy, h, hit) for st, hit in zip(stars, hits)])
         g = block_average(self.blur(np.moveaxis(meas, -1, 1)), s)  # (K, 2, n/s, n/s)
         return img, np.moveaxis(g[..., m : m + T, m : m + T] * (s * s), 1, -1)
+
+    def _fringes(self, fringes, apex, gradient: bool):
+        """The fringe path: exact sub-pixel means (fringe_subpixel), PSF, block summation"""
+        s, m, T = self.s, self.margin, self.tile
+        dx, dy = np.meshgrid(self.centres - apex[0], self.centres - apex[1])
+        sub = [fringe_subpixel(f, dx, dy, 1.0 / s) for f in fringes]
+        img = block_average(self.blur(np.stack([v for v, _ in sub])), s)[:, m : m + T, m : m + T]
+        if not gradient:
+            return img, None
+        # the mean gradient over a sub-pixel, averaged over the s x s block: the integral over the pixel
+        g = block_average(self.blur(np.stack([np.moveaxis(gr, -1, 0) for _, gr in sub])), s)
+        return img, np.moveaxis(g[..., m : m + T, m : m + T], 1, -1)
 
 
 def render_view(stars, kernel: np.ndarray, s: int, tile: int, apex, gradient: bool = True):

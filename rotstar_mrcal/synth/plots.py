@@ -18,7 +18,7 @@ SYNOPSIS
 - views_figure: what the refiners see: each pattern at one tilted view
   under each aberration, noise-free (the 16-segment star's centre turns grey
   under blur: its narrow wedges average out, the aliasing the paper argues
-  against).
+  against; the phase pattern's first frame is the fringes along x, step 0).
 """
 
 from __future__ import annotations
@@ -30,9 +30,10 @@ from matplotlib.figure import Figure
 
 from .experiment import Protocol, psf_kernel, render_views
 
-COLOURS = {"opencv": "tab:blue", "saddle": "tab:orange", "symmetric": "tab:green"}
-STYLES = {"checkerboard": "-", "rotstar": "--", "star16": ":"}
-MARKERS = {"checkerboard": "o", "rotstar": "s", "star16": "^"}
+COLOURS = {"opencv": "tab:blue", "saddle": "tab:orange", "symmetric": "tab:green", "phase": "tab:red"}
+STYLES = {"checkerboard": "-", "rotstar": "--", "star16": ":", "phase": "-."}
+MARKERS = {"checkerboard": "o", "rotstar": "s", "star16": "^", "phase": "D"}
+FLOOR = 1e-4  # px: ranges below are drawn at it
 
 
 def range_figure(protocol: Protocol, rows: list[dict], noise: float) -> Figure:
@@ -48,6 +49,7 @@ def range_figure(protocol: Protocol, rows: list[dict], noise: float) -> Figure:
                              and r["refiner"] == ref and math.isfinite(r["range"]) and r["fail"] < 0.5)
                 if pts:
                     x, y = zip(*pts)
+                    y = np.maximum(y, FLOOR)  # a log axis has no 0 (the phase corner, noise-free, symmetric PSF)
                     ax.plot(x, y, STYLES.get(pat, "-"), marker=MARKERS.get(pat, "o"), color=COLOURS.get(ref),
                             label=f"{pat} / {ref}", ms=4)
         ax.set_yscale("log")
@@ -56,7 +58,8 @@ def range_figure(protocol: Protocol, rows: list[dict], noise: float) -> Figure:
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("pairwise-distance range [px]")
     axes[-1].legend(fontsize=7, loc="best")
-    fig.suptitle("Mean pairwise-distance range over the alpha views (failures > 50% not drawn)", fontsize=9)
+    fig.suptitle(f"Mean pairwise-distance range over the alpha views (failures > 50% not drawn, "
+                 f"ranges below {FLOOR:g} px drawn at {FLOOR:g})", fontsize=9)
     return fig
 
 

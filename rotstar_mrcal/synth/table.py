@@ -37,6 +37,15 @@ Columns (pixels unless said):
 over_tilts averages the rows of every (aberration, noise, pattern, refiner)
 over the tilts: range, rms and scatter as means (rms and scatter as root mean
 squares), bound as an RMS.
+
+A refiner that does not apply to a pattern (refiners.applies: the phase
+refiner and the fringes, the wedge refiners and the stars) has no row; grid
+shows the pattern x refiner structure with those cells "n/a":
+
+    >>> g = grid([dict(aberration="coma", noise=0.0, pattern="rotstar", refiner="symmetric", range=0.03, fail=0.0),
+    ...           dict(aberration="coma", noise=0.0, pattern="phase", refiner="phase", range=0.1, fail=0.0)], 0.0)
+    >>> print(g.splitlines()[3])
+    | coma | phase | n/a | 0.1000 |
 """
 
 from __future__ import annotations
@@ -48,6 +57,7 @@ import numpy as np
 
 from ..optics.crlb import crlb_rms
 from .metrics import failure_rate, pairwise_range, rms_error
+from .refiners import applies
 
 COLUMNS = ("aberration", "noise", "phi", "pattern", "refiner", "range", "rms", "bias", "scatter", "bound",
            "rms_over_bound", "scatter_over_bound", "fail")
@@ -65,6 +75,8 @@ def tabulate(protocol, results: dict) -> list[dict]:
         for j, pat in enumerate(protocol.patterns):
             b = float(noise) * float(np.sqrt(np.mean(crlb_rms(fisher[:, j]) ** 2)))
             for i, ref in enumerate(protocol.refiners):
+                if not applies(pat, ref):
+                    continue  # n/a
                 x = det[:, :, j, i]  # (R, V, 2)
                 with np.errstate(invalid="ignore"), _quiet():
                     rng = float(np.nanmean(pairwise_range(x))) if np.isfinite(pairwise_range(x)).any() else float("nan")
@@ -142,6 +154,33 @@ def markdown(rows: list[dict], with_phi: bool = False) -> str:
             _fmt(r["bound"]), _fmt(r["rms_over_bound"], 2), _fmt(r["scatter_over_bound"], 2),
             f"{100 * r['fail']:.0f}" if math.isfinite(r["fail"]) else "n/a"]
         lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def grid(mean_rows: list[dict], noise: float) -> str:
+    """Markdown: mean range (px) per (aberration, pattern) row and refiner column at one noise level
+
+    "n/a" where the refiner does not apply to the pattern (no row for it),
+    "fails (N%)" where more than half of its detections failed.
+    """
+    rows = [r for r in mean_rows if r["noise"] == noise]
+    if not rows:
+        return "(no pattern-refiner pair that applies)\n"
+    refs = list(dict.fromkeys(r["refiner"] for r in rows))
+    cell = {(r["aberration"], r["pattern"], r["refiner"]): r for r in rows}
+    keys = list(dict.fromkeys((r["aberration"], r["pattern"]) for r in rows))
+    lines = ["| aberration | pattern | " + " | ".join(refs) + " |", "|---|---|" + "---|" * len(refs)]
+    for a, pat in keys:
+        cells = []
+        for ref in refs:
+            r = cell.get((a, pat, ref))
+            if r is None:
+                cells.append("n/a")
+            elif math.isfinite(r["fail"]) and r["fail"] > 0.5:
+                cells.append(f"fails ({100 * r['fail']:.0f}%)")
+            else:
+                cells.append(_fmt(r["range"]))
+        lines.append(f"| {a} | {pat} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 

@@ -18,7 +18,8 @@ B, so that their numbers can be tabulated side by side:
     heldout      A's intrinsics on B's boards and the reverse (heldout.py),
                  each on that method's own corners of the test group
     crossval     mrcal's projection diff of A and B against uA + uB (crossval.py)
-    truth        simulated data only: each model against the true one (truth.py)
+    truth        simulated data only: each model against the true one (truth.py),
+                 and the true tilt of every test pose (tilts.py)
 
 The arrays behind the numbers (grids for the figures, per-pose errors) come
 back with them.
@@ -34,6 +35,7 @@ import numpy as np
 from .calibrate import calibration_stats
 from .crossval import CrossVal, cross_validate
 from .heldout import HeldOut, heldout
+from .tilts import tilts_of
 from .truth import TruthError, truth_error, truth_poses_of
 
 
@@ -63,14 +65,19 @@ class Evaluation:
     truth: dict[str, TruthError]  # 'A', 'B' (simulated data)
 
 
-def _heldout_summary(h: HeldOut, names) -> dict:
-    return {
+def _heldout_summary(h: HeldOut, test: TestSet, truth: TrueCamera | None) -> dict:
+    out = {
         "mean_px": h.mean,
         "rms_px": h.rms,
         "boards": h.boards,
         "points": h.points,
-        "per_pose": {n: (None if not np.isfinite(v) else float(v)) for n, v in zip(names, h.per_pose)},
+        "per_pose": {n: (None if not np.isfinite(v) else float(v)) for n, v in zip(test.names, h.per_pose)},
     }
+    if truth is not None:  # the true tilt of each test pose (the error by tilt, tilts.by_tilt)
+        ny, nx = test.corners.shape[1:3]
+        out["tilt_deg"] = tilts_of(truth.rt_cam_board, test.names,
+                                   ((nx - 1) * test.spacing / 2, (ny - 1) * test.spacing / 2, 0.0))
+    return out
 
 
 def evaluate(method: str, model_a: mrcal.cameramodel, model_b: mrcal.cameramodel, test_a: TestSet,
@@ -94,8 +101,8 @@ def evaluate(method: str, model_a: mrcal.cameramodel, model_b: mrcal.cameramodel
     summary = {
         "method": method,
         "calibration": {"A": calibration_stats(model_a), "B": calibration_stats(model_b)},
-        "heldout": {"A->B": _heldout_summary(held["A->B"], test_b.names),
-                    "B->A": _heldout_summary(held["B->A"], test_a.names)},
+        "heldout": {"A->B": _heldout_summary(held["A->B"], test_b, truth_b),
+                    "B->A": _heldout_summary(held["B->A"], test_a, truth_a)},
         "crossval": cv_summary,
         "truth": {k: v.summary() for k, v in terr.items()} or None,
     }

@@ -56,19 +56,25 @@ def dataset_methods() -> list[str]:
 
 
 def detect_methods(frames, layout, full_scale: float, checkerboard=None, methods=None,
-                   window: float = 10.0, identity=None) -> dict[str, Found]:
+                   window: float = 10.0, identity=None, phase=None, star=None) -> dict[str, Found]:
     """Every requested method's corners of one pose (rotstar_mrcal.methods); see the module doc
 
     frames: (nframes, H, W) rotating-star frames; checkerboard: (H, W) (the
     averaged captures) or None, in which case the checkerboard methods find
-    nothing; identity: (nidentity, H, W) identity frames or None. rotstar is detected once and starts the methods that start from it.
+    nothing; identity: (nidentity, H, W) identity frames or None; phase:
+    (2, 4, H, W) the phase shifts along x then y, and star: (H, W) the star
+    frame (rotstar-pattern --paper-sequence), each or None: given, the
+    methods that need them may be asked for. rotstar is detected once and
+    starts the methods that start from it.
     """
+    allowed = method_names(needs=("rotstar", "checkerboard") + ("phase",) * (phase is not None)
+                           + ("star",) * (star is not None))
     ms = [method(m) for m in (dataset_methods() if methods is None else methods)]
-    bad = [m.name for m in ms if m.name not in dataset_methods()]
+    bad = [m.name for m in ms if m.name not in allowed]
     if bad:
-        raise ValueError(f"methods {bad} need other images; known here: {', '.join(dataset_methods())}")
+        raise ValueError(f"methods {bad} need other images; known here: {', '.join(allowed)}")
     p = PoseImages(layout, full_scale, frames=np.asarray(frames, np.float32), checkerboard=checkerboard,
-                   window=window, identity=identity)
+                   window=window, identity=identity, phase=phase, star=star)
     r = rotstar_detection(p)
     ref = r.corners if r.found else None
     out: dict[str, Found] = {}

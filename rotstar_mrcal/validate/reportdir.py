@@ -11,7 +11,10 @@ SYNOPSIS
     '8000-us-saturated'
 
 build_report writes OUT/index.md and index.html (report.markdown/html),
-headline.md, results.json (all conditions), the summary bar charts, each
+headline.md (with the paper's claims in short when the run compares the
+paper's patterns), paper.md (simulated data: the held-out error by tilt of
+the test poses; the paper's patterns: every claim with its checks,
+validate.claims), results.json (all conditions), the summary bar charts, each
 condition's per-pose plot and maps (copied from its rotstar-crossval
 folder), and mrcal's own views of the first method's group-A calibration
 (mrcalshow.calibration_figures: uncertainty, residuals, diff against group
@@ -30,7 +33,8 @@ import shutil
 from ..atomic import atomic_write
 from . import plots
 from .groups import Comparison
-from .report import headline, html, markdown, methods_of, verdicts
+from .claims import claims, short_lines
+from .report import headline, html, markdown, methods_of, paper_run, paper_section, verdicts
 
 
 def slug(s: str) -> str:
@@ -138,8 +142,13 @@ def build_report(results, dirs, out: str, title: str, notes: str = "", extra_fig
     page = html(results, title, figures, per_condition, notes)
     head = headline(results)
     head_md = head.markdown() + "\n\n" + "\n".join(f"- {v}" for v in verdicts(results)) + "\n"
+    paper = paper_section(results)  # the table by tilt (simulated) and the paper's claims (its patterns)
+    if paper_run(results):  # the claims in short under the headline too
+        head_md += "\nThe paper's claims (4.2):\n\n" + "\n".join(short_lines(claims(results))) + "\n"
     files = {"index.md": md, "index.html": page, "headline.md": head_md,
              "results.json": json.dumps({"format": "rotstar-report/1", "conditions": results}, indent=1) + "\n"}
+    if paper:
+        files["paper.md"] = paper
     for name, text in files.items():  # each file whole or not at all
         with atomic_write(os.path.join(out, name)) as f:
             f.write(text)

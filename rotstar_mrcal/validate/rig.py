@@ -1,0 +1,293 @@
+"""Several cameras calibrated at once: mrcal-calibrate-cameras with one glob per camera, and what it says per camera
+
+SYNOPSIS
+
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> argv = rig_argv("corners.vnl", make_layout(), {0: (1280, 800), 1: (1280, 800), 2: (1280, 720)},
+    ...                 {0: 640, 1: 641, 2: 918}, "LENSMODEL_OPENCV8", "cal",
+    ...                 ["seq/*/camera-0/rotstar_00.png", "seq/*/camera-1/rotstar_00.png", "seq/*/camera-2/rotstar_00.png"])
+    >>> print(command_line(argv))
+    mrcal-calibrate-cameras --corners-cache corners.vnl --lensmodel LENSMODEL_OPENCV8 --focal 640,641,918 --object-spacing 0.0144318182 --object-width-n 14 --object-height-n 9 --valid-intrinsics-region-parameters 5 0.05 2 3 0 --outdir cal 'seq/*/camera-0/rotstar_00.png' 'seq/*/camera-1/rotstar_00.png' 'seq/*/camera-2/rotstar_00.png'
+
+    # the whole calibration, as rotstar-calibrate runs it on a multi-camera dataset:
+    rs = load_rig_corners("cal/corners.vnl", "seq")
+    c = calibrate_rig(rs, "cal")       # writes cal/camera-0.cameramodel, cal/camera-1.cameramodel, ...
+    print("\\n".join(c.summary_lines()))
+
+The command. mrcal-calibrate-cameras takes one image glob per camera (the
+glob's position is the camera's index; `seq/*/camera-K/rotstar_00.png`)
+and tells the instants apart by the number in the middle of the file names
+(poseNNN; dataset.read_rig); every camera needs >= 2 boards for that (and
+MIN_BOARDS for a calibration: check_rig). --focal takes one value per
+camera, comma-separated. --imagersize applies to every camera: it is given
+when all cameras have the same size; otherwise it is left out and mrcal
+reads each camera's size from its first image, which must then be readable
+from where the command runs (as the vnl names them, or next to the vnl).
+mrcal writes camera-K.cameramodel for camera K, each with its extrinsics
+(rt_cam_ref; camera 0 at the origin) and the whole problem's
+optimization_inputs.
+
+The lens model: the lean LENSMODEL_OPENCV8 for every camera (rotstar-calibrate's
+lean/splined choice is the one-camera path's), or the one given.
+
+Per camera (camera_stats): boards and corners used, mrcal's outliers (corners
+the vnl had that the solve dropped) and the boards it rejected mostly (a
+board labelled differently in this camera than in the others fits no common
+board pose: its corners are rejected; detect.rig's labelling check should
+have dropped it already), the 2-D fit RMS and worst residual, and where the
+camera is relative to camera 0 (centre, mm; rotation, degrees). A camera
+with more than calibrate.MAX_OUTLIER_FRACTION of its corners rejected, or a
+board mostly rejected, fails the checks (no models written unless keep).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import shutil
+
+import mrcal
+import numpy as np
+
+from .. import dataset
+from ..atomic import atomic_path
+from ..focal import focal_estimates
+from ..vnl import mrcal_keeps, read_corners
+from .calibrate import (MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, VALID_REGION_PARAMETERS,
+                        CalibrationError, InputError, command_line, resolve_lensmodel, run_calibration, vnl_has_weights)
+
+
+def camera_of(path: str) -> int | None:
+    """The camera index K of a file name .../camera-K/<file>, else None
+
+    >>> camera_of("seq/pose003/camera-1/rotstar_00.png"), camera_of("seq/pose003/rotstar_00.png")
+    (1, None)
+    """
+    return dataset.camera_index(os.path.basename(os.path.dirname(str(path))))
+
+
+def rig_globs(seq: str, cameras, first_frame: str) -> list[str]:
+    """One glob per camera, camera 0 first: seq/*/camera-K/<first frame>
+
+    >>> rig_globs("seq", [0, 1], "rotstar_00.png")
+    ['seq/*/camera-0/rotstar_00.png', 'seq/*/camera-1/rotstar_00.png']
+    """
+    return [os.path.join(seq, "*", dataset.camera_folder(k), first_frame) for k in cameras]
+
+
+def rig_argv(vnl: str, layout, imagersizes: dict, focals: dict, lensmodel: str, outdir: str, globs,
+             weights: bool = False, extra=()) -> list[str]:
+    """The mrcal-calibrate-cameras command of a rig (a list, program first); see the module doc"""
+    cams = sorted(imagersizes)
+    sizes = {tuple(int(v) for v in imagersizes[k]) for k in cams}
+    argv = ["mrcal-calibrate-cameras"] + (["--corners-cache-has-weights"] if weights else [])
+    argv += ["--corners-cache", vnl, "--lensmodel", lensmodel,
+             "--focal", ",".join(f"{focals[k]:.0f}" for k in cams)]
+    if len(sizes) == 1:
+        W, H = sizes.pop()
+        argv += ["--imagersize", str(W), str(H)]
+    argv += [*layout.mrcal_object_args(),
+             "--valid-intrinsics-region-parameters", *(f"{v:g}" for v in VALID_REGION_PARAMETERS),
+             "--outdir", outdir, *extra, *globs]
+    return argv
+
+
+@dataclasses.dataclass
+class RigCornerSet:
+    """The boards of a multi-camera corners.vnl, split by camera"""
+
+    vnl: str
+    seq: str
+    layout: object
+    files: dict[int, list[str]]  # camera -> its boards' file names (boards mrcal keeps)
+    corners: dict[int, np.ndarray]  # camera -> (N, ny, nx, 2)
+    imagersizes: dict[int, tuple[int, int]]
+    weights: bool
+
+    @property
+    def cameras(self) -> list[int]:
+        return sorted(self.imagersizes)
+
+    def focal(self, k: int) -> float:
+        """Camera k's focal seed: the median of its boards' estimates (focal.focal_estimates)"""
+        est = focal_estimates(list(self.corners[k]), self.layout.board_points()[..., :2], self.imagersizes[k])
+        return float(np.median(est)) if len(est) else self.imagersizes[k][0] / 2
+
+
+def load_rig_corners(vnl: str, seq: str) -> RigCornerSet:
+    """Read a corners.vnl of the multi-camera dataset seq; InputError when it holds no board of some camera"""
+    pattern, layout = dataset.read_pattern(seq)
+    rig = dataset.read_rig(seq, pattern["frames"])
+    with open(vnl, encoding="ascii") as f:
+        try:
+            boards = read_corners(f, layout.nx, layout.ny)
+        except ValueError as e:
+            raise InputError(f"{vnl}: {e} (is {seq}/pattern.json the pattern of these corners?)") from None
+    files = {k: [] for k in rig.cameras}
+    for fn, grid in boards.items():
+        k = camera_of(fn)
+        if k in files and mrcal_keeps(grid):
+            files[k].append(fn)
+    corners = {k: (np.stack([boards[f] for f in fs]) if fs else np.zeros((0, layout.ny, layout.nx, 2)))
+               for k, fs in files.items()}
+    return RigCornerSet(vnl, seq, layout, files, corners, {k: rig.sizes[k] for k in rig.cameras},
+                        vnl_has_weights(vnl))
+
+
+def check_rig(rs: RigCornerSet) -> None:
+    """InputError (one line) unless every camera has >= MIN_BOARDS boards and a known image size"""
+    for k in rs.cameras:
+        n = len(rs.files[k])
+        if n < MIN_BOARDS:
+            raise InputError(f"{dataset.camera_folder(k)}: {n} board{'s' * (n != 1)} in {rs.vnl}; a calibration "
+                             f"needs at least {MIN_BOARDS} per camera (mrcal itself 2, to match the instants)")
+        if rs.imagersizes[k] is None:
+            raise InputError(f"{dataset.camera_folder(k)}: no readable image gives the camera's size")
+
+
+def rig_residuals(oi: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(N, ny, nx) 2-D reprojection errors (NaN: missing or outlier) and (N,) camera of each observation"""
+    obs = oi["observations_board"]
+    N, ny, nx = obs.shape[:3]
+    idx = oi["indices_frame_camintrinsics_camextrinsics"]
+    obj = mrcal.ref_calibration_object(nx, ny, oi["calibration_object_spacing"], calobject_warp=oi.get("calobject_warp"))
+    p = mrcal.transform_point_rt(oi["rt_ref_frame"][idx[:, 0]][:, None, None, :], obj)
+    ext = idx[:, 2]
+    if len(oi["rt_cam_ref"]):
+        p = np.where((ext >= 0)[:, None, None, None],
+                     mrcal.transform_point_rt(oi["rt_cam_ref"][np.maximum(ext, 0)][:, None, None, :], p), p)
+    q = np.stack([mrcal.project(p[b], oi["lensmodel"], oi["intrinsics"][idx[b, 1]]) for b in range(N)]) if N else p[..., :2]
+    e = np.linalg.norm(q - obs[..., :2], axis=-1)
+    return np.where(obs[..., 2] > 0, e, np.nan), idx[:, 1]
+
+
+def relative_pose(model: mrcal.cameramodel) -> dict:
+    """Where a camera is relative to camera 0: its centre (mm) and rotation (degrees)"""
+    rt = model.extrinsics_rt_fromref()
+    c = -mrcal.R_from_r(rt[:3]).T @ rt[3:]
+    return {"centre_mm": [float(v) * 1000 for v in c], "distance_mm": float(np.linalg.norm(c) * 1000),
+            "rotation_deg": float(math.degrees(np.linalg.norm(rt[:3])))}
+
+
+def camera_stats(oi: dict, rs: RigCornerSet) -> dict[int, dict]:
+    """Per camera: boards, corners, outliers, boards mostly rejected, fit RMS and worst residual (module doc)"""
+    e, cam = rig_residuals(oi)
+    obs = oi["observations_board"]
+    paths = [os.path.normpath(str(p)) for p in (oi.get("imagepaths") if oi.get("imagepaths") is not None else [])]
+    given_of = {os.path.normpath(f): np.isfinite(c).all(axis=-1)
+                for k in rs.cameras for f, c in zip(rs.files[k], rs.corners[k])}
+    out = {}
+    for k in rs.cameras:
+        b = np.flatnonzero(cam == k)
+        ek = e[b]
+        ok = np.isfinite(ek)
+        given = np.stack([given_of.get(paths[i], np.ones(obs.shape[1:3], bool)) if len(paths) == len(obs)
+                          else np.ones(obs.shape[1:3], bool) for i in b]) if len(b) else np.zeros((0,) + obs.shape[1:3], bool)
+        outlier = given & ~(obs[b][..., 2] > 0)
+        lost, had = outlier.sum(axis=(1, 2)), given.sum(axis=(1, 2))
+        name = [dataset.camera_folder(k) + ":" + (paths[i].split(os.sep)[-3] if len(paths) == len(obs) else str(i))
+                for i in b]
+        out[k] = {
+            "boards": int(len(b)),
+            "corners": int(ok.sum()),
+            "outliers": int(outlier.sum()),
+            "outlier_fraction": float(outlier.sum() / max(1, given.sum())),
+            "boards_mostly_outliers": {name[j]: [int(lost[j]), int(had[j])]
+                                       for j in np.flatnonzero(lost > MOSTLY_OUTLIERS * had)},
+            "rms_px": float(np.sqrt(np.mean(ek[ok] ** 2))) if ok.any() else float("nan"),
+            "worst_px": float(np.max(ek[ok])) if ok.any() else float("nan"),
+        }
+    return out
+
+
+@dataclasses.dataclass
+class RigCalibration:
+    """The result of calibrate_rig: the models written (or not), per camera what the solve says, and why"""
+
+    models: dict[int, str]  # camera -> outdir/camera-K.cameramodel when written
+    lensmodel: str
+    command: str
+    stats: dict[int, dict]  # camera_stats, plus 'lensmodel', 'focal_px', 'centre_px' and relative_pose
+    failures: list[str]
+    kept: bool
+    corners: str
+
+    FORMAT = "rotstar-calibrate-rig/1"
+
+    @property
+    def ok(self) -> bool:
+        return not self.failures
+
+    def to_json(self) -> dict:
+        return {"format": self.FORMAT, "ok": self.ok, "models": {f"camera-{k}": v for k, v in self.models.items()},
+                "lensmodel": self.lensmodel, "command": self.command, "failures": self.failures, "kept": self.kept,
+                "corners": self.corners, "cameras": {f"camera-{k}": v for k, v in self.stats.items()}}
+
+    def summary_lines(self) -> list[str]:
+        out = []
+        for k, s in self.stats.items():
+            rel = s["relative"]
+            where = ("the reference (origin)" if k == 0 else
+                     "centre at ({:.1f}, {:.1f}, {:.1f}) mm from camera-0 ({:.2f} mm away), turned {:.3f} deg".format(
+                         *rel["centre_mm"], rel["distance_mm"], rel["rotation_deg"]))
+            out.append(f"camera-{k}: {s['boards']} boards, {s['corners']} corners, {s['outliers']} outliers; fit RMS "
+                       f"{s['rms_px']:.5f} px (2-D), worst {s['worst_px']:.4f} px; fx {s['focal_px'][0]:.2f} "
+                       f"fy {s['focal_px'][1]:.2f}; {where}")
+        return out
+
+
+def rig_failures(stats: dict[int, dict]) -> list[str]:
+    out = []
+    for k, s in stats.items():
+        if s["outlier_fraction"] > MAX_OUTLIER_FRACTION:
+            out.append(f"camera-{k}: mrcal rejected {s['outliers']} of its corners as outliers "
+                       f"({100 * s['outlier_fraction']:.1f}% > {100 * MAX_OUTLIER_FRACTION:.0f}%)")
+        if s["boards_mostly_outliers"]:
+            out.append(f"camera-{k}: mrcal rejected most corners of " + ", ".join(
+                f"{n} ({a} of {b})" for n, (a, b) in s["boards_mostly_outliers"].items())
+                + " (a board labelled differently than in the other cameras, or a pose barely constrained)")
+    return out
+
+
+def calibrate_rig(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: float | None = None, keep: bool = False,
+                  in_process: bool = False, log=None) -> RigCalibration:
+    """Calibrate every camera of a rig at once; write outdir/camera-K.cameramodel if the checks pass (or keep)
+
+    Raises InputError before mrcal runs (check_rig), CalibrationError when
+    mrcal fails. The solve's own models stay in outdir/candidates/rig/.
+    """
+    log = log or (lambda s: None)
+    check_rig(rs)
+    focals = {k: (float(focal) if focal else rs.focal(k)) for k in rs.cameras}
+    lensmodel = resolve_lensmodel(spec, rs.imagersizes[0], focals[0])
+    first = os.path.basename(rs.files[0][0])
+    work = os.path.join(outdir, "candidates", "rig")
+    finals = {k: os.path.join(outdir, f"camera-{k}.cameramodel") for k in rs.cameras}
+    for fn in list(finals.values()) + [os.path.join(work, f"camera-{k}.cameramodel") for k in rs.cameras]:
+        if os.path.exists(fn):
+            os.remove(fn)
+    argv = rig_argv(rs.vnl, rs.layout, rs.imagersizes, focals, lensmodel, work,
+                    rig_globs(rs.seq, rs.cameras, first), rs.weights)
+    cmd = command_line(argv)
+    log("$ " + cmd)
+    run_calibration(argv, in_process=in_process)  # raises CalibrationError; checks camera-0 was written
+    models = {}
+    for k in rs.cameras:
+        fn = os.path.join(work, f"camera-{k}.cameramodel")
+        if not os.path.exists(fn):
+            raise CalibrationError(f"mrcal-calibrate-cameras wrote no {fn}")
+        models[k] = mrcal.cameramodel(fn)
+    stats = camera_stats(models[0].optimization_inputs(), rs)
+    for k, m in models.items():
+        lens, intr = m.intrinsics()
+        stats[k].update(lensmodel=lens, focal_px=[float(v) for v in intr[:2]], centre_px=[float(v) for v in intr[2:4]],
+                        relative=relative_pose(m))
+    failures = rig_failures(stats)
+    written = {}
+    if not failures or keep:
+        for k in rs.cameras:
+            with atomic_path(finals[k]) as tmp:
+                shutil.copyfile(os.path.join(work, f"camera-{k}.cameramodel"), tmp)
+            written[k] = finals[k]
+    return RigCalibration(written, lensmodel, cmd, stats, failures, bool(failures) and keep, rs.vnl)
