@@ -119,11 +119,14 @@ class Unit:
     exposures: tuple  # (Exposure, ...)
 
 
-def paper_layout(nx: int | None = None, ny: int | None = None, screen=None):
-    """The default screen with the phase shifts and the star, no identity frames (smaller: for tests)"""
-    kw = {} if screen is None else dict(screen=screen, pitch=100, band=24, phase_period=100)
-    kw.setdefault("phase_period", 150)
-    return make_layout(identity=False, star_segments=16, **kw, **({} if nx is None else dict(nx=nx, ny=ny)))
+def paper_layout(screen=None):
+    """The default screen with the phase shifts and the star, no identity frames; screen=(W, H): a small one
+
+        >>> [f["kind"] for f in paper_layout((800, 600)).frames()][7:10]
+        ['rotstar', 'phase', 'phase']
+    """
+    kw = dict(phase_period=150) if screen is None else dict(screen=screen, pitch=100, band=24, phase_period=100)
+    return make_layout(identity=False, star_segments=16, **kw)
 
 
 def fitted_pose(model, layout, tilt_deg: float, roll_deg: float, axis_deg: float) -> np.ndarray:
@@ -293,7 +296,14 @@ def corner_stats(errors, why) -> dict:
 
 
 def summarize(records: list[dict]) -> dict:
-    """{table: {row: {method: corner_stats}}}, rows and methods in the order of TABLES and the records"""
+    """{table: {row: {method: corner_stats}}}, rows and methods in the order of TABLES
+
+        >>> recs = [{"table": "gamma", "row": "2.6", "method": "phase", "errors": [0.1, 0.3], "why": ["", ""]},
+        ...         {"table": "gamma", "row": "2.6", "method": "phase", "errors": [np.nan], "why": ["dim"]}]
+        >>> s = summarize(recs)["gamma"]["2.6"]["phase"]
+        >>> s["in_view"], s["found"], s["rejected"]
+        (3, 2, {'dim': 1})
+    """
     acc: dict = {}
     for r in records:
         m = acc.setdefault(r["table"], {}).setdefault(r["row"], {}).setdefault(r["method"], ([], []))
@@ -316,7 +326,14 @@ def cell(s: dict) -> str:
 
 
 def table(summary: dict, name: str) -> str:
-    """One Markdown table: a row per condition, a column per method"""
+    """One Markdown table: a row per condition, a column per method
+
+        >>> s = {"gamma": {"2.6": {"phase": corner_stats([0.1, 0.3], ["", ""])}}}
+        >>> print(table(s, "gamma"))
+        | screen gamma | rotstar | phase | star |
+        |---|---|---|---|
+        | 2.6 |  | 0.224 / 0.290 (100%) |  |
+    """
     rows = summary.get(name, {})
     methods = TABLES[name][1]
     head = [TABLES[name][0]] + [TITLES[m] for m in methods]
