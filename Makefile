@@ -35,7 +35,7 @@ help:
 	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
 	@echo "make test   - run the test suite (all set-up included)"
 	@echo "make stereo - simulated D435 stereo pair: joint calibrations vs the truth, cross-validation, depth error at 0.5/1/2 m"
-	@echo "make bench  - accuracy and speed against OpenCV and mrgingham, partial views against ChArUco, then calib-bench and coverage-bench"
+	@echo "make bench  - accuracy and speed against OpenCV and mrgingham, partial views against ChArUco, each method's failure modes, then calib-bench and coverage-bench"
 	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses)"
 	@echo "make coverage-bench - mrcal's uncertainty with and without boards hanging over the imager's edges"
 	@echo "make pip-check   - install with plain pip (scripts/pip_install.sh) into a fresh venv and check it"

@@ -7,6 +7,7 @@ SYNOPSIS
     python scripts/bench.py --quick         # 4 poses, 9 partial views: a smoke run
     python scripts/bench.py --poses 40 --bits 8 --jobs 2 --out /tmp/b
     python scripts/bench.py --partial 0 --whole 0       # without the partial views
+    python scripts/bench.py --poses 0 --partial 0 --whole 0 --failures 2    # the failure modes only
 
 Prints the Markdown tables (stdout) with the goals evaluated beneath them;
 writes bench.json, bench.md and error-cdf.png into --out. Progress goes to
@@ -29,6 +30,7 @@ package's; this script only strings them together:
     rotstar_mrcal.benchmark.tables       the Markdown tables, bench.json, README's sentence
     rotstar_mrcal.benchmark.plots        the corner error CDF
     rotstar_mrcal.benchmark.partial      partial views: boards over the image's edges, rotstar against ChArUco
+    rotstar_mrcal.benchmark.failures     each method's failure modes: saturation, gamma mismatch, tilt and roll, noise
 
 See doc/benchmark.md.
 """
@@ -51,7 +53,7 @@ import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 
-from rotstar_mrcal.benchmark import calibration, detection, partial, scene as scenes, scoring, tables  # noqa: E402
+from rotstar_mrcal.benchmark import calibration, detection, failures, partial, scene as scenes, scoring, tables  # noqa: E402
 from rotstar_mrcal.benchmark.plots import plot_cdf  # noqa: E402
 from rotstar_mrcal.docblock import rewrite_block  # noqa: E402
 from rotstar_mrcal.benchmark import speed  # noqa: E402
@@ -59,6 +61,7 @@ from rotstar_mrcal.methods import METHODS  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOCUMENTED = {"poses": 20, "seed": 0, "bits": 16, "partial": 34, "whole": 10}  # the run doc/benchmark.md shows
+DOCUMENTED_FAILURES = {"failures": 2, "seed": 0}  # the failure-mode run it shows (its own block)
 
 
 def log(msg: str) -> None:
@@ -68,14 +71,19 @@ def log(msg: str) -> None:
 def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--poses", type=int, default=20, help="random poses (default 20)")
-    p.add_argument("--quick", action="store_true", help="smoke run: 4 poses, --partial 1 --whole 1")
+    p.add_argument("--poses", type=int, default=20,
+                   help="random poses (default 20; 0: no accuracy benchmark, only the failure modes)")
+    p.add_argument("--quick", action="store_true", help="smoke run: 4 poses, --partial 1 --whole 1 --failures 1")
     p.add_argument("--partial", type=int, default=34,
                    help="partial views: boards hanging over the image's edges, per lens (2) and condition (3) "
                         "(default 34: 204 views; 0: none)")
     p.add_argument("--whole", type=int, default=10,
                    help="partial views' whole boards on the wide-angle lens at 30-65 degrees, per condition "
                         "(default 10)")
+    p.add_argument("--failures", type=int, default=2,
+                   help="failure modes: poses per condition (phase under saturation and display gamma mismatch, "
+                        "the star under tilt and roll, noise; the same images for every method) "
+                        "(default 2: 38 renders; 0: none)")
     p.add_argument("--seed", type=int, default=0, help="poses and noise (default 0)")
     p.add_argument("--bits", type=int, choices=(8, 16), default=16, help="image depth (default 16)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
@@ -87,11 +95,13 @@ def parse_args(argv=None):
                         "calibration, speed) and README.md's summary (default: doc/benchmark.md; '' for none)")
     a = p.parse_args(argv)
     if a.quick:
-        a.poses, a.partial, a.whole = 4, 1, 1
-    if a.poses < 1:
-        p.error("--poses must be at least 1")
+        a.poses, a.partial, a.whole, a.failures = 4, 1, 1, 1
+    if a.poses < 0 or a.failures < 0:
+        p.error("--poses and --failures must be at least 0")
     if a.partial < 0 or a.whole < 0:
         p.error("--partial and --whole must be at least 0")
+    if a.poses == 0 and (a.partial or a.whole or not a.failures):
+        p.error("--poses 0 runs the failure modes only: give --partial 0 --whole 0 and --failures N")
     return a
 
 
@@ -199,9 +209,52 @@ def write_docs(a, m: dict, text: dict) -> None:
             log(f"rewrote the block {name} of {os.path.relpath(path)}")
 
 
+def measure_failures(a) -> dict | None:
+    """The failure modes (in --jobs processes, before the detectors are pinned to one CPU), or None"""
+    if not a.failures:
+        return None
+    t0 = time.perf_counter()
+    started = datetime.datetime.now().astimezone()
+    units = failures.make_units(a.failures, a.seed)
+    log(f"failure modes: {len(units)} renders of the paper's sequence through make demo's lens, each exposed and "
+        f"detected by every method of its table ({a.jobs} process(es)) ...")
+    s = failures.summarize(failures.run_units(units, max(1, a.jobs), a.seed, log=log))
+    wall = time.perf_counter() - t0
+    log(f"failure modes: {wall:.0f} s")
+    return {"summary": s, "wall": wall, "started": started, "machine": tables.machine(),
+            "text": failures.text(s, a.failures, a.seed)}
+
+
+def write_failures(a, f: dict) -> None:
+    """failures.md and failures.json into a.out; with the documented settings, the blocks bench:failures"""
+    os.makedirs(a.out, exist_ok=True)
+    when = (f"{f['started']:%Y-%m-%d %H:%M %Z}, {f['machine']['cpu']}, {f['machine']['cores']} cores; wall time "
+            f"{f['wall']:.0f} s with {a.jobs} process(es).")
+    with open(os.path.join(a.out, "failures.md"), "w") as fh:
+        fh.write(f"# Failure modes\n\n{when}\n\n{f['text']}\n")
+    with open(os.path.join(a.out, "failures.json"), "w") as fh:
+        json.dump({"settings": {"failures": a.failures, "seed": a.seed}, "wall_s": f["wall"], "jobs": a.jobs,
+                   "summary": f["summary"]}, fh, indent=1)
+        fh.write("\n")
+    log(f"wrote {a.out}/failures.md, failures.json")
+    if a.doc and {"failures": a.failures, "seed": a.seed} == DOCUMENTED_FAILURES:
+        for path, name, block in ((a.doc, "bench:failures", f"{when}\n\n{f['text']}"),
+                                  (os.path.join(ROOT, "README.md"), "bench:failures",
+                                   failures.readme_line(f["summary"]))):
+            if rewrite_block(path, name, block):
+                log(f"rewrote the block {name} of {os.path.relpath(path)}")
+
+
 def main(argv=None) -> int:
     a = parse_args(argv)
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))  # workers stopped on the way out
+    fails = measure_failures(a)
+    if fails:
+        print(f"## Failure modes\n\n{fails['text']}\n")
+        sys.stdout.flush()
+        write_failures(a, fails)
+    if not a.poses:
+        return 0
     m = measure(a)
     text = {"table": tables.accuracy_table(m["summary"], m["run"].memory), "goals": tables.goal_lines(m["goals"]),
             "partial": partial_text(a, m["partial"]) if m["partial"] else "",

@@ -37,9 +37,41 @@ PAPER_SEQUENCE = dict(phase_period=150, star_segments=16)  # rotstar-pattern --p
 from ..simulate.camera import PRESETS, preset_model
 from ..simulate.dataset import Settings, write_dataset
 from ..simulate.poses import default_distance_range, random_poses
+from ..optics import TERMS, LensPSF, Seidel
 from ..simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_dataset
-from ..simulate.screen import exact_frames, png_frames
-from .common import EXIT_CODES_HELP, EXIT_FAILED, check_output_path, fail, run
+from ..simulate.screen import exact_frames, png_frames, shown_light
+from .common import EXIT_CODES_HELP, EXIT_FAILED, check_output_path, fail, number_arg, run
+
+DISPLAY_GAMMA = 2.2  # the gamma rotstar-pattern encodes for when pattern.json records none
+
+
+def seidel_arg(spec: str) -> Seidel:
+    """argparse type of --seidel: 'coma=1.5,focus=0.3' -> Seidel (waves at the image corners)
+
+    SYNOPSIS
+
+        >>> seidel_arg("coma=1.5,focus=0.3")
+        Seidel(tilt=0.0, focus=0.3, spherical=0.0, coma=1.5, astigmatism=0.0, tilt_angle=0.0, coma_angle=0.0, astigmatism_angle=0.0)
+        >>> seidel_arg("coma=x")
+        Traceback (most recent call last):
+        argparse.ArgumentTypeError: 'coma=x': coma must be a finite number of waves
+    """
+    terms = {}
+    for item in spec.split(","):
+        name, eq, value = item.strip().partition("=")
+        if not eq or name not in TERMS:
+            raise argparse.ArgumentTypeError(f"{spec!r}: expected TERM=WAVES,... with TERM one of {', '.join(TERMS)}")
+        if name in terms:
+            raise argparse.ArgumentTypeError(f"{spec!r}: {name} given twice")
+        try:
+            v = float(value)
+        except ValueError:
+            v = math.nan
+        if not math.isfinite(v) or abs(v) > 20:
+            raise argparse.ArgumentTypeError(f"{spec!r}: {name} must be a finite number of waves"
+                                             + (" (at most 20 in size)" if math.isfinite(v) else ""))
+        terms[name] = v
+    return Seidel(**terms)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -91,7 +123,19 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--rgb", action="store_true", help="with --rig: add the colour camera (camera 2, grayscale, 8-bit)")
     p.add_argument("--poses", type=int, default=24, help="number of random poses")
     p.add_argument("--seed", type=int, default=0, help="seed of the poses and of the noise")
-    p.add_argument("--blur", type=float, default=1.0, help="Gaussian PSF sigma in camera pixels (0: none)")
+    p.add_argument("--blur", type=float, default=None,
+                   help="Gaussian PSF sigma in camera pixels (0: none); default 1.0 (without --seidel)")
+    p.add_argument("--seidel", type=seidel_arg, default=None, metavar="TERM=WAVES,...",
+                   help="a lens PSF from Seidel aberrations instead of the Gaussian --blur: waves at the image "
+                        "corners of " + ", ".join(TERMS) + ", e.g. 'coma=1.5,focus=0.3' (make demo's lens); "
+                        "field-dependent (tilt and coma grow with the field radius, focus and astigmatism with "
+                        "its square, coma and astigmatism point along it), diffraction at F/2, 3 um pixels, "
+                        "550 nm; coma's centroid shift is put back by tilt = -coma unless tilt is given")
+    p.add_argument("--screen-gamma", type=number_arg(float, 0.1, 10), default=None, metavar="G",
+                   help="the screen's real gamma: the pattern's 8-bit values are encoded for the display gamma "
+                        "pattern.json records (rotstar-pattern --gamma; 2.2 if none) and the screen emits "
+                        "(value/255)^G; binary frames do not notice, phase-shift fringes bend. Default: no "
+                        "mismatch (the exact linear frames, or --screen-png decoded with the encoded gamma)")
     p.add_argument("--noise", type=float, default=0.01, help="additive Gaussian noise sigma, fraction of full scale")
     p.add_argument(
         "--shot", type=float, default=0.0, help="signal-dependent noise: variance per unit signal (1/full-well)"
@@ -144,6 +188,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--paper-sequence is for the default screen; with --pattern the sequence is the pattern.json's")
     if args.screen_png and not args.pattern:
         p.error("--screen-png needs --pattern DIR")
+    if args.seidel is not None and args.blur is not None:
+        p.error("--seidel replaces the Gaussian --blur; give one of them")
+    if args.seidel is not None and args.rig:
+        p.error("--seidel is not simulated for a --rig (its cameras have their own Gaussian --blur)")
+    if args.blur is None:
+        args.blur = 0.0 if args.seidel is not None else 1.0
     if args.rgb and not args.rig:
         p.error("--rgb adds the colour camera of a --rig")
     if args.rig and args.display_offsets:
@@ -184,6 +234,22 @@ def display_offsets(spec: str | None, n: int, seed: int) -> np.ndarray | None:
     return v.reshape(n, 2)
 
 
+def display_gamma(pattern: dict, where: str) -> float:
+    """The display gamma a pattern.json says its PNGs are encoded for (DISPLAY_GAMMA if it says none)"""
+    g = pattern.get("display_gamma", DISPLAY_GAMMA)
+    if isinstance(g, bool) or not isinstance(g, (int, float)) or not 0.1 <= g <= 10:
+        raise ValueError(f"{where}: pattern.json's display_gamma {g!r} is not a number in [0.1, 10]")
+    return float(g)
+
+
+def screen_frames(args, layout, encoded: float) -> np.ndarray:
+    """The light the screen emits for every frame: exact, or the PNGs, shown with --screen-gamma"""
+    if args.screen_png:
+        return png_frames(args.pattern, layout, encoded if args.screen_gamma is None else args.screen_gamma)
+    frames = exact_frames(layout)
+    return frames if args.screen_gamma is None else shown_light(frames, encoded, args.screen_gamma)
+
+
 def load_camera(spec: str) -> tuple[mrcal.cameramodel, str]:
     if spec in PRESETS:
         return preset_model(spec), spec
@@ -207,7 +273,7 @@ def settings_of(args) -> Settings:
                     value_bits=args.value_bits, seed=args.seed)
 
 
-def _rig(args, layout, frames, cams, distance, say) -> int:
+def _rig(args, layout, frames, cams, distance, say, gammas: dict) -> int:
     """--rig: the board poses drawn for camera 0, each camera rendering those it sees"""
     rt, seen = rig_poses(cams, layout, args.poses, np.random.default_rng([0, args.seed]), distance=distance,
                          max_tilt_deg=args.max_tilt, margin_px=args.margin)
@@ -217,7 +283,7 @@ def _rig(args, layout, frames, cams, distance, say) -> int:
     write_rig_dataset(args.out, layout, cams, rt, seen, settings_of(args), frames=frames, jobs=args.jobs,
                       progress=say, extra={"rig": args.rig, "rgb": args.rgb, "screen": "png" if args.screen_png
                                            else "exact", "distance_m": list(distance),
-                                           "max_tilt_deg": args.max_tilt, "margin_px": args.margin})
+                                           "max_tilt_deg": args.max_tilt, "margin_px": args.margin, **gammas})
     thin = [k for k in range(len(cams)) if seen[:, k].sum() < 2]
     print(args.out)
     if thin:
@@ -233,8 +299,10 @@ def _main(argv=None) -> int:
         print(f"rotstar-simulate: {msg}", file=sys.stderr, flush=True)
 
     try:
+        encoded = DISPLAY_GAMMA
         if args.pattern:
-            _, layout = read_pattern(args.pattern)
+            d, layout = read_pattern(args.pattern)
+            encoded = display_gamma(d, args.pattern)
             if not args.identity:
                 layout = dataclasses.replace(layout, identity=False)
         else:
@@ -253,14 +321,16 @@ def _main(argv=None) -> int:
     except (DatasetError, ValueError) as e:
         fail(str(e))
     try:
-        frames = png_frames(args.pattern, layout) if args.screen_png else exact_frames(layout)
+        frames = screen_frames(args, layout, encoded)
+        gammas = {"display_gamma": encoded,
+                  "screen_gamma": args.screen_gamma if args.screen_gamma is not None else encoded}
         distance = tuple(args.distance) if args.distance else default_distance_range(model, layout)
         say(
             f"{args.poses} poses of a {layout.nx}x{layout.ny} grid ({len(frames)} frames each), camera {camera} "
             f"{model.imagersize()[0]}x{model.imagersize()[1]}, {distance[0]:.3g}-{distance[1]:.3g} m"
         )
         if args.rig:
-            return _rig(args, layout, frames, cams, distance, say)
+            return _rig(args, layout, frames, cams, distance, say, gammas)
         rts = random_poses(
             model,
             layout,
@@ -290,12 +360,14 @@ def _main(argv=None) -> int:
             rts,
             settings,
             frames=frames,
+            psf=None if args.seidel is None else LensPSF(args.seidel, model.imagersize()),
             jobs=args.jobs,
             display_offsets=display_offsets(args.display_offsets, layout.nframes, args.seed),
             progress=say,
             extra={
                 "camera": camera,
                 "screen": "png" if args.screen_png else "exact",
+                **gammas,
                 "distance_m": list(distance),
                 "max_tilt_deg": args.max_tilt,
                 "margin_px": args.margin if args.margin is not None else 0.02 * float(model.imagersize()[0]),

@@ -11,7 +11,7 @@ Modules, one concept each:
 
     wavefront  Seidel coefficients and the pupil function P exp(2 pi i W)
     psf        H = A |F(P exp(2 pi i W))|^2 sampled at the renderer's sub-pixels;
-               adapters for simulate.render_irradiance (SeidelPSF, radial_psf)
+               adapters for simulate.render_irradiance (SeidelPSF, radial_psf, LensPSF)
     crlb       Fisher information of a corner position and its Cramer-Rao bound
 
 See doc/optics.md.
@@ -19,6 +19,7 @@ See doc/optics.md.
 
 from .crlb import closed_form_corner_bound, crlb_cov, crlb_rms, fisher_information
 from .psf import (
+    LensPSF,
     Optics,
     SeidelPSF,
     asymmetry,
@@ -33,7 +34,7 @@ from .wavefront import TERMS, Seidel, pupil_function, wavefront
 
 __all__ = [
     "Seidel", "TERMS", "wavefront", "pupil_function",
-    "Optics", "wavefront_psf", "gaussian_psf", "SeidelPSF", "radial_psf",
+    "Optics", "wavefront_psf", "gaussian_psf", "SeidelPSF", "radial_psf", "LensPSF",
     "asymmetry", "centroid_px", "second_moment_px", "geometric_radius_px",
     "fisher_information", "crlb_cov", "crlb_rms", "closed_form_corner_bound",
 ]

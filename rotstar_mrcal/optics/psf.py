@@ -278,3 +278,57 @@ def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, tile_px: in
         seidel, tilt=seidel.tilt * 1.5, coma=seidel.coma * 1.5, focus=seidel.focus * 2.25,
         astigmatism=seidel.astigmatism * 2.25)
     return TiledPSF(kernel_at, tile_px=tile_px, radius_px=geometric_radius_px(worst, optics) + 1.0)
+
+
+class LensPSF:
+    """radial_psf over a whole image, kept by value: it pickles (for worker processes), built on first use
+
+    SYNOPSIS
+
+        >>> import numpy as np
+        >>> from rotstar_mrcal.optics import LensPSF, Seidel
+        >>> psf = LensPSF(Seidel(coma=1.5, focus=0.3), (128, 96))     # waves at the image corners
+        >>> psf.seidel.tilt                                           # coma's centroid put back
+        -1.5
+        >>> out = psf(np.ones((1, 128, 128), np.float32), (0, 0), 4)
+        >>> bool(np.allclose(out, 1, atol=1e-5)), psf.radius_px > 1
+        (True, True)
+
+    The Seidel amplitudes are those at the image corners (h = 1, the field
+    radius is the half-diagonal from the image centre (W-1)/2, (H-1)/2):
+    tilt and coma grow linearly with the field radius, focus (field
+    curvature) and astigmatism with its square, spherical is constant; coma
+    and astigmatism point along the field radius (radial_psf). Coma moves
+    the light's centroid off the chief ray; unless `tilt` is given, an
+    equal and opposite tilt (tilt = -coma) puts it back, so the true camera
+    model is where the light's centroid lands (what rotstar_mrcal.demo does).
+    """
+
+    def __init__(self, seidel: Seidel, imagersize, optics: Optics | None = None, tile_px: int = 64,
+                 tail: float = DEFAULT_TAIL, tilt: float | None = None):
+        self.seidel = dataclasses.replace(seidel, tilt=-seidel.coma if tilt is None else float(tilt))
+        self.imagersize = tuple(int(v) for v in imagersize)
+        self.optics = Optics() if optics is None else optics
+        self.tile_px, self.tail = int(tile_px), float(tail)
+        self._psf = None
+
+    def _built(self) -> TiledPSF:
+        if self._psf is None:
+            W, H = self.imagersize
+            c = ((W - 1) / 2, (H - 1) / 2)
+            self._psf = radial_psf(self.seidel, c, self.optics, self.tile_px, math.hypot(*c), self.tail)
+        return self._psf
+
+    def __getstate__(self):
+        return {k: v for k, v in self.__dict__.items() if k != "_psf"} | {"_psf": None}
+
+    @property
+    def radius_px(self) -> float:
+        return self._built().radius_px
+
+    def __call__(self, sub, origin, s):
+        return self._built()(sub, origin, s)
+
+    def describe(self):
+        return {"kind": "seidel-field", "seidel_at_corners": self.seidel.to_dict(), "optics": self.optics.to_dict(),
+                "imagersize": list(self.imagersize), "tile_px": self.tile_px}
