@@ -95,17 +95,19 @@ def test_saturated_exposure_cli(tmp_path, run_cli):
 
 
 def test_sequence_without_the_frames(tmp_path, run_cli):
-    """The default sequence (no --paper-sequence): --method phase | star refused in one line, naming pattern.json,
-    pointing to the default method"""
+    """The default sequence (no --paper-sequence): --method phase | star says in one line, naming pattern.json,
+    that it cannot run and that the rotating-star corners are written instead, writes them, and exits 1"""
     plain = make_layout(screen=(1000, 860), pitch=150, band=40)
     seq = str(tmp_path / "seq")
-    ds.write_pattern(seq, plain)
-    ds.write_pose(seq, "pose000", {f["file"]: np.zeros((8, 8), np.uint8) for f in plain.frames()})
+    model = simulate.preset_model("d435")
+    simulate.write_dataset(seq, plain, model, poses(model, plain)[:1], simulate.Settings(seed=3))
+    ref = run_cli("rotstar-detect", seq, "-q")
+    assert ref.returncode == 0 and ref.stdout.count("rotstar_00.png") == plain.nx * plain.ny
     for method, what in (("phase", "phase-shift frames"), ("star", "star frame")):
-        r = run_cli("rotstar-detect", seq, "--method", method)
-        assert r.returncode == 2 and r.stdout == ""
-        line = r.stderr.strip()
-        assert "\n" not in line and "pattern.json" in line and f"no {what}" in line and "--paper-sequence" in line
-        assert "the rotating-star corners are still available with the default --method rotstar" in line
+        r = run_cli("rotstar-detect", seq, "--method", method, "-q")
+        assert r.returncode == 1 and r.stdout == ref.stdout
+        line = next(x for x in r.stderr.splitlines() if "cannot run" in x)
+        assert "pattern.json" in line and f"no {what}" in line and "--paper-sequence" in line
+        assert "writing the rotating-star corners (--method rotstar) instead" in line
     r = run_cli("rotstar-detect", seq, "--method", "phase", "--weights")
     assert r.returncode == 2 and "--weights and --refine are rotstar's" in r.stderr

@@ -64,7 +64,8 @@ def parse_args(argv=None):
     p.add_argument("--method", choices=DETECT_METHODS, default="rotstar",
                    help="whose corners to write, all from the same poses and started from the rotating star's "
                         "labelled corners: " + "; ".join(f"{n}: {METHODS[n].description}" for n in DETECT_METHODS[1:])
-                        + " (default rotstar; phase and star need a sequence from rotstar-pattern --paper-sequence)")
+                        + " (default rotstar; phase and star need a sequence from rotstar-pattern --paper-sequence: without "
+                        "its frames the rotating-star corners are written instead, with a message and exit status 1)")
     p.add_argument("--weights", action="store_true",
                    help="write a weight column (1/sigma of each corner, normalised to median 1) "
                         "for mrcal's --corners-cache-has-weights")
@@ -127,10 +128,34 @@ def main(argv=None) -> int:
     return run("rotstar-detect", _main, argv)
 
 
+def fall_back_to_rotstar(a) -> bool:
+    """--method phase|star on a sequence without their frames: say so, and detect rotstar's corners instead
+
+    The corners are still written (a calibration can go on), the exit status
+    is 1 (the method asked for did not run), and the message says which
+    corners the output holds.
+    """
+    from ..detect.run import missing_frames
+
+    try:
+        _, layout = dataset.read_pattern(a.seq)
+    except dataset.DatasetError:
+        return False  # the detection reports it
+    what = missing_frames(layout, a.method)
+    if what:
+        say(f"rotstar-detect: {dataset.pattern_file(a.seq)}: the sequence has no {what} (it was recorded without "
+            f"rotstar-pattern --paper-sequence): --method {a.method} cannot run; writing the rotating-star corners "
+            f"(--method rotstar) instead, exit status 1")
+        a.method = "rotstar"
+    return bool(what)
+
+
 def _main(argv=None) -> int:
     a = parse_args(argv)
+    fell_back = fall_back_to_rotstar(a)
     if dataset.is_multi_camera(a.seq):
-        return _main_rig(a)
+        rc = _main_rig(a)
+        return EXIT_FAILED if fell_back and rc == 0 else rc
     progress = None
 
     def report(r):
@@ -199,7 +224,7 @@ def _main(argv=None) -> int:
             say("rotstar-detect: stdout is not a file: save the corners (rotstar-detect ... > corners.vnl, or -o) "
                 "and put that file's name for corners.vnl below")
         say("next, calibrate with:\n  " + cmd)
-    return 0
+    return EXIT_FAILED if fell_back else 0
 
 
 def _main_rig(a) -> int:

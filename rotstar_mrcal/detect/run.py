@@ -115,6 +115,24 @@ def started_from_rotstar(name: str, r: PoseCorners, p: dataset.Pose, layout: Lay
     return dataclasses.replace(r, corners=f.corners, reasons=reasons, sigma=None, cov=None)
 
 
+def missing_frames(layout: Layout, name: str) -> str:
+    """'' or the frames method `name` needs and the dataset's sequence lacks ('phase-shift frames', 'star frame')
+
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> plain = make_layout(screen=(800, 600), pitch=100, band=24)
+    >>> missing_frames(plain, "phase"), missing_frames(plain, "saddle")
+    ('phase-shift frames', '')
+    """
+    from ..methods import method
+
+    needs = method(name).needs
+    if needs == "phase" and not layout.phase:
+        return "phase-shift frames"
+    if needs == "star" and not layout.star_segments:
+        return "star frame"
+    return ""
+
+
 def method_available(layout: Layout, name: str) -> str:
     """'' or why the dataset's sequence cannot give method `name`'s corners (one line)
 
@@ -125,8 +143,8 @@ def method_available(layout: Layout, name: str) -> str:
     from ..methods import method
 
     m = method(name)
-    if m.needs == "phase" and not layout.phase or m.needs == "star" and not layout.star_segments:
-        what = "phase-shift frames" if m.needs == "phase" else "star frame"
+    what = missing_frames(layout, name)
+    if what:
         return (f"the sequence has no {what} (it was recorded without rotstar-pattern --paper-sequence): "
                 f"--method {name} cannot run; the rotating-star corners are still available with the default "
                 f"--method rotstar")
