@@ -130,7 +130,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "corners of " + ", ".join(TERMS) + ", e.g. 'coma=1.5,focus=0.3' (make demo's lens); "
                         "field-dependent (tilt and coma grow with the field radius, focus and astigmatism with "
                         "its square, coma and astigmatism point along it), diffraction at F/2, 3 um pixels, "
-                        "550 nm; coma's centroid shift is put back by tilt = -coma unless tilt is given")
+                        "550 nm; coma's centroid shift is put back by tilt = -coma unless tilt is given; with --rig each "
+                        "camera gets the lens over its own imager (the right imager's amplitudes x0.9, the colour "
+                        "camera's x1.1)")
     p.add_argument("--screen-gamma", type=number_arg(float, 0.1, 10), default=None, metavar="G",
                    help="the screen's real gamma: the pattern's 8-bit values are encoded for the display gamma "
                         "pattern.json records (rotstar-pattern --gamma; 2.2 if none) and the screen emits "
@@ -190,8 +192,6 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--screen-png needs --pattern DIR")
     if args.seidel is not None and args.blur is not None:
         p.error("--seidel replaces the Gaussian --blur; give one of them")
-    if args.seidel is not None and args.rig:
-        p.error("--seidel is not simulated for a --rig (its cameras have their own Gaussian --blur)")
     if args.blur is None:
         args.blur = 0.0 if args.seidel is not None else 1.0
     if args.rgb and not args.rig:
@@ -283,7 +283,8 @@ def _rig(args, layout, frames, cams, distance, say, gammas: dict) -> int:
     write_rig_dataset(args.out, layout, cams, rt, seen, settings_of(args), frames=frames, jobs=args.jobs,
                       progress=say, extra={"rig": args.rig, "rgb": args.rgb, "screen": "png" if args.screen_png
                                            else "exact", "distance_m": list(distance),
-                                           "max_tilt_deg": args.max_tilt, "margin_px": args.margin, **gammas})
+                                           "max_tilt_deg": args.max_tilt, "margin_px": args.margin, **gammas},
+                      seidel=args.seidel)
     thin = [k for k in range(len(cams)) if seen[:, k].sum() < 2]
     print(args.out)
     if thin:

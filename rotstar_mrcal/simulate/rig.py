@@ -74,6 +74,7 @@ from ..parallel import process_map
 from ..pattern.layout import Layout
 from .camera import camera_rays, preset_model
 from .dataset import Settings, _do_pose, _setup, _STATE, true_corners
+from ..optics import LensPSF
 from .optics import describe_psf
 from .poses import pose_ok, random_poses
 from .screen import exact_frames
@@ -105,6 +106,7 @@ class RigCamera:
     model: mrcal.cameramodel
     blur_px: float  # Gaussian PSF sigma, camera pixels
     bits: int | None = None  # PNG bit depth (None: the settings')
+    psf_scale: float = 1.0  # its lens's blur and aberrations against the left imager's
 
 
 def scaled_intrinsics(intrinsics, scale: float) -> np.ndarray:
@@ -161,14 +163,34 @@ def rig_cameras(name: str = "d435", seed: int = 0, rgb: bool = False, blur_px: f
     cams = [
         RigCamera("left IR", camera_model(lens, intr0, (W, H), np.zeros(3), np.zeros(3)), blur_px),
         RigCamera("right IR", camera_model(lens, intr1, (W, H), small_rotation(rng, 0.1, 0.3),
-                                           (BASELINE_M, 0.0, 0.0)), 0.9 * blur_px),
+                                           (BASELINE_M, 0.0, 0.0)), 0.9 * blur_px, psf_scale=0.9),
     ]
     if rgb:
         intr2 = scaled_intrinsics(COLOUR_INTRINSICS, scale)
         cw, ch = int(round(1280 * scale)), int(round(720 * scale))
         cams.append(RigCamera("colour", camera_model(lens, intr2, (cw, ch), small_rotation(rng, 0.2, 0.4),
-                                                     (COLOUR_OFFSET_M, 0.0, 0.0)), 1.1 * blur_px, bits=8))
+                                                     (COLOUR_OFFSET_M, 0.0, 0.0)), 1.1 * blur_px, bits=8,
+                              psf_scale=1.1))
     return cams
+
+
+def scaled_seidel(seidel, scale: float):
+    """The Seidel amplitudes (waves) times scale, their directions kept
+
+        >>> from rotstar_mrcal.optics import Seidel
+        >>> scaled_seidel(Seidel(coma=1.5, focus=0.3), 0.9).coma
+        1.35
+    """
+    amp = ("tilt", "focus", "spherical", "coma", "astigmatism")
+    return dataclasses.replace(seidel, **{a: round(getattr(seidel, a) * scale, 12) for a in amp})
+
+
+def describe_lens(lens) -> str:
+    """The truth's words for a camera's LensPSF"""
+    s = lens.seidel
+    terms = ", ".join(f"{a} {getattr(s, a):g}" for a in ("tilt", "focus", "spherical", "coma", "astigmatism")
+                      if getattr(s, a))
+    return f"Seidel wavefront PSF, waves at the image corners: {terms} (optics.LensPSF)"
 
 
 def rig_poses(cameras: list[RigCamera], layout: Layout, n: int, rng=None, *, distance=None,
@@ -225,11 +247,14 @@ def truth_model_name(k: int) -> str:
 
 def write_rig_dataset(seq: str, layout: Layout, cameras: list[RigCamera], rt_ref_board, seen,
                       settings: Settings = Settings(), *, frames: np.ndarray | None = None, jobs: int = 1,
-                      progress=None, extra: dict | None = None) -> RigTruth:
+                      progress=None, extra: dict | None = None, seidel=None) -> RigTruth:
     """Render every camera's poses (the one-camera renderer, per camera), write the truth; return it
 
     seen: (n, ncam) bool from rig_poses. Camera k's noise is seeded per
     (settings.seed, k, pose), so the images do not depend on jobs.
+    seidel: an optics.Seidel (waves at the image corners, rotstar-simulate
+    --seidel) instead of the Gaussian blur: each camera gets that lens over
+    its own imager (optics.LensPSF), its amplitudes scaled by its psf_scale.
     """
     rt = np.asarray(rt_ref_board, float).reshape(-1, 6)
     seen = np.asarray(seen, bool)
@@ -243,6 +268,8 @@ def write_rig_dataset(seq: str, layout: Layout, cameras: list[RigCamera], rt_ref
         vb = settings.value_bits if settings.value_bits is not None and settings.value_bits <= bits else None
         cam_settings.append(dataclasses.replace(settings, blur_px=c.blur_px, bits=bits, value_bits=vb))
         c.model.write(os.path.join(seq, truth_model_name(k)))
+    lenses = [None if seidel is None else LensPSF(scaled_seidel(seidel, c.psf_scale), c.model.imagersize())
+              for c in cameras]
     truth = RigTruth(
         models=[c.model for c in cameras],
         layout=layout,
@@ -251,17 +278,18 @@ def write_rig_dataset(seq: str, layout: Layout, cameras: list[RigCamera], rt_ref
                      for k, c in enumerate(cameras) if seen[i, k]}
                  for i, (n, r) in enumerate(zip(names, rt))},
         settings={**dataclasses.asdict(settings), **(extra or {}),
-                  "cameras": [{"model": truth_model_name(k), "role": c.role, "psf": describe_psf(s.blur_px),
-                               "blur_px": s.blur_px, "bits": s.bits} for k, (c, s) in
-                              enumerate(zip(cameras, cam_settings))]},
+                  "cameras": [{"model": truth_model_name(k), "role": c.role,
+                               "psf": describe_psf(s.blur_px) if lens is None else describe_lens(lens),
+                               "blur_px": s.blur_px, "bits": s.bits} for k, (c, s, lens) in
+                              enumerate(zip(cameras, cam_settings, lenses))]},
     )
     write_rig_truth(seq, truth)
     t0, done, total = time.perf_counter(), 0, int(seen.sum())
-    for k, (c, s) in enumerate(zip(cameras, cam_settings)):
+    for k, (c, s, lens) in enumerate(zip(cameras, cam_settings, lenses)):
         jobs_k = [(seq, k * 1_000_003 + i, f"{n}/{ds.camera_folder(k)}",
                    mrcal.compose_rt(c.model.extrinsics_rt_fromref(), r))
                   for i, (n, r) in enumerate(zip(names, rt)) if seen[i, k]]
-        init = (layout, frames, (c.model.intrinsics(), c.model.imagersize()), camera_rays(c.model), s, None)
+        init = (layout, frames, (c.model.intrinsics(), c.model.imagersize()), camera_rays(c.model), s, lens)
         try:
             for name, dt in process_map(_do_pose, jobs_k, jobs, _setup, init):
                 done += 1
