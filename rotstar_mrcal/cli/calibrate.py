@@ -141,17 +141,22 @@ def _main(argv=None) -> int:
     except cal.CalibrationError as e:
         say(f"rotstar-calibrate: {e}")
         return 1
+    report(c, a.outdir, "no model written; --keep writes it anyway")
+    if c.model_path:
+        print(c.model_path)
+    return 0 if c.model_path else 1
+
+
+def report(c, outdir: str, unkept: str) -> None:
+    """A calibration's summary lines and failures (stderr) and its calibration.json in outdir"""
     for line in c.summary_lines():
         say(f"rotstar-calibrate: {line}")
-    with atomic_write(os.path.join(a.outdir, "calibration.json")) as f:
+    with atomic_write(os.path.join(outdir, "calibration.json")) as f:
         json.dump(c.to_json(), f, indent=1)
         f.write("\n")
     if c.failures:
         say(f"rotstar-calibrate: {'kept despite: ' if c.kept else 'FAILED: '}" + "; ".join(c.failures)
-            + ("" if c.kept else " (no model written; --keep writes it anyway)"))
-    if c.model_path:
-        print(c.model_path)
-    return 0 if c.model_path else 1
+            + ("" if c.kept else f" ({unkept})"))
 
 
 def _main_rig(a) -> int:
@@ -191,14 +196,7 @@ def _main_rig(a) -> int:
     except cal.CalibrationError as e:
         say(f"rotstar-calibrate: {e}")
         return 1
-    for line in c.summary_lines():
-        say(f"rotstar-calibrate: {line}")
-    with atomic_write(os.path.join(a.outdir, "calibration.json")) as f:
-        json.dump(c.to_json(), f, indent=1)
-        f.write("\n")
-    if c.failures:
-        say(f"rotstar-calibrate: {'kept despite: ' if c.kept else 'FAILED: '}" + "; ".join(c.failures)
-            + ("" if c.kept else " (no models written; --keep writes them anyway)"))
+    report(c, a.outdir, "no models written; --keep writes them anyway")
     for k in sorted(c.models):
         print(c.models[k])
     return 0 if c.models else 1

@@ -128,6 +128,14 @@ def main(argv=None) -> int:
     return run("rotstar-detect", _main, argv)
 
 
+def write_output(output: str | None, boards, weights):
+    """The corners to the file `output` (atomically) or to stdout; write_corners' sparse boards"""
+    if output:
+        with atomic_write(output) as out:
+            return write_corners(out, boards, weights)
+    return write_corners(sys.stdout, boards, weights)
+
+
 def fall_back_to_rotstar(a) -> bool:
     """--method phase|star on a sequence without their frames: say so, and detect rotstar's corners instead
 
@@ -137,6 +145,8 @@ def fall_back_to_rotstar(a) -> bool:
     """
     from ..detect.run import missing_frames
 
+    if a.method == "rotstar":
+        return False
     try:
         _, layout = dataset.read_pattern(a.seq)
     except dataset.DatasetError:
@@ -196,12 +206,7 @@ def _main(argv=None) -> int:
         say(f"{r.pose}: skipped: {r.error}")
     if a.refine == "symmetric":
         say(f"rotstar-detect: {det.display.summary()}")
-    weights = det.weights() if a.weights else None
-    if a.output:
-        with atomic_write(a.output) as out:
-            sparse = write_corners(out, det.boards(), weights)
-    else:
-        sparse = write_corners(sys.stdout, det.boards(), weights)
+    sparse = write_output(a.output, det.boards(), det.weights() if a.weights else None)
     dropped = {s.file for s in sparse}
     pose_of = {r.file: r.pose for r in det.results}
     for s in sparse:
@@ -268,12 +273,7 @@ def _main_rig(a) -> int:
             say(f"rotstar-detect: {dataset.camera_folder(k)}: {d.display.summary()}")
     for pose, why in det.disagree.items():
         say(f"{pose}: skipped in every camera: {why}")
-    weights = det.weights() if a.weights else None
-    if a.output:
-        with atomic_write(a.output) as out:
-            sparse = write_corners(out, det.boards(), weights)
-    else:
-        sparse = write_corners(sys.stdout, det.boards(), weights)
+    sparse = write_output(a.output, det.boards(), det.weights() if a.weights else None)
     for s in sparse:
         say(sparse_line(os.path.relpath(os.path.dirname(s.file), a.seq), s))
     dropped = {s.file for s in sparse}
