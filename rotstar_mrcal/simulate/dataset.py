@@ -307,25 +307,36 @@ def truth_to_dict(truth: Truth) -> dict:
     }
 
 
-def write_truth(seq: str, truth: Truth) -> str:
-    """Write seq/truth.json (the model goes to seq/truth.cameramodel separately)"""
+def write_truth_json(seq: str, d: dict) -> str:
+    """Write the dict d as seq/truth.json; its path"""
     fn = os.path.join(seq, "truth.json")
     with open(fn, "w") as f:
-        json.dump(truth_to_dict(truth), f, indent=1)
+        json.dump(d, f, indent=1)
         f.write("\n")
     return fn
 
 
-def load_truth(seq: str) -> Truth:
-    """Read seq/truth.json, seq/truth.cameramodel and seq/pattern.json"""
+def read_truth_json(seq: str, fmt: str, other: str = "") -> dict:
+    """seq/truth.json as a dict; DatasetError unless readable and of format fmt (other: what else it may be)"""
     fn = os.path.join(seq, "truth.json")
     try:
         with open(fn) as f:
             d = json.load(f)
     except (OSError, json.JSONDecodeError) as e:
         raise ds.DatasetError(f"{fn}: cannot read the truth ({e})") from None
-    if d.get("format") != TRUTH_FORMAT:
-        raise ds.DatasetError(f"{fn}: not a {TRUTH_FORMAT} file")
+    if d.get("format") != fmt:
+        raise ds.DatasetError(f"{fn}: not a {fmt} file{f' ({other})' if other else ''}")
+    return d
+
+
+def write_truth(seq: str, truth: Truth) -> str:
+    """Write seq/truth.json (the model goes to seq/truth.cameramodel separately)"""
+    return write_truth_json(seq, truth_to_dict(truth))
+
+
+def load_truth(seq: str) -> Truth:
+    """Read seq/truth.json, seq/truth.cameramodel and seq/pattern.json"""
+    d = read_truth_json(seq, TRUTH_FORMAT)
     model = mrcal.cameramodel(os.path.join(seq, d.get("camera_model", "truth.cameramodel")))
     _, layout = ds.read_pattern(seq)
     poses = d["poses"]

@@ -61,7 +61,6 @@ rig at half the resolution (640x400, colour 640x360) for tests.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 import time
@@ -73,7 +72,7 @@ from .. import dataset as ds
 from ..parallel import process_map
 from ..pattern.layout import Layout
 from .camera import camera_rays, preset_model
-from .dataset import Settings, _do_pose, _setup, _STATE, true_corners
+from .dataset import Settings, _do_pose, _setup, _STATE, read_truth_json, true_corners, write_truth_json
 from ..optics import LensPSF
 from .optics import describe_psf
 from .poses import pose_ok, random_poses
@@ -314,23 +313,12 @@ def write_rig_truth(seq: str, truth: RigTruth) -> str:
                       "corners": {ds.camera_folder(k): c.tolist() for k, c in truth.corners[n].items()}}
                   for n in truth.poses},
     }
-    fn = os.path.join(seq, "truth.json")
-    with open(fn, "w") as f:
-        json.dump(d, f, indent=1)
-        f.write("\n")
-    return fn
+    return write_truth_json(seq, d)
 
 
 def load_rig_truth(seq: str) -> RigTruth:
     """Read seq/truth.json, seq/truth-camera-K.cameramodel and seq/pattern.json of a simulated rig"""
-    fn = os.path.join(seq, "truth.json")
-    try:
-        with open(fn) as f:
-            d = json.load(f)
-    except (OSError, json.JSONDecodeError) as e:
-        raise ds.DatasetError(f"{fn}: cannot read the truth ({e})") from None
-    if d.get("format") != RIG_TRUTH_FORMAT:
-        raise ds.DatasetError(f"{fn}: not a {RIG_TRUTH_FORMAT} file (a one-camera dataset's truth?)")
+    d = read_truth_json(seq, RIG_TRUTH_FORMAT, "a one-camera dataset's truth?")
     models = []
     for name in d["cameras"]:
         try:
