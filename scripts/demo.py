@@ -45,35 +45,22 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import re  # noqa: E402
-import shlex  # noqa: E402
 import shutil  # noqa: E402
 import signal  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
+from rotstar_mrcal.steps import log, run_step, short_path  # noqa: E402
+
+
+def run(cmd, **kw):
+    """A step of make demo (rotstar_mrcal.steps.run_step)"""
+    return run_step(cmd, "demo", **kw)
+
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEFAULT_SEED = 1
-
-
-def short_path(p: str) -> str:
-    """p relative to the working directory if it lies below it, else absolute (for printed commands)"""
-    r = os.path.relpath(p)
-    return os.path.abspath(p) if r.startswith("..") else r
-
-
-def log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-def run(cmd, **kw) -> subprocess.CompletedProcess:
-    log("$ " + shlex.join(cmd))
-    t = time.monotonic()
-    r = subprocess.run(cmd, **kw)
-    if r.returncode != 0:
-        sys.exit(f"demo: step failed ({cmd[0]}, exit {r.returncode})")
-    log(f"  ({time.monotonic() - t:.0f} s)")
-    return r
 
 
 def parse_args(argv=None):

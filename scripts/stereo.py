@@ -50,12 +50,19 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import shlex  # noqa: E402
 import shutil  # noqa: E402
 import signal  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+
+from rotstar_mrcal.steps import log, run_step, short_path  # noqa: E402
+
+
+def run(cmd, **kw):
+    """A step of make stereo (rotstar_mrcal.steps.run_step)"""
+    return run_step(cmd, "stereo", **kw)
+
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEFAULT_SEED = 1
@@ -64,25 +71,6 @@ METHODS = ("rotstar", "saddle")
 LENSMODEL = "LENSMODEL_OPENCV8"
 SUPERSAMPLE = 2
 LENS = "coma=1.5,focus=0.3"  # make demo's lens (rotstar_mrcal.demo.scene), for every camera of the rig
-
-
-def log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-def short_path(p: str) -> str:
-    r = os.path.relpath(p)
-    return os.path.abspath(p) if r.startswith("..") else r
-
-
-def run(cmd, **kw) -> subprocess.CompletedProcess:
-    log("$ " + shlex.join(cmd))
-    t = time.monotonic()
-    r = subprocess.run(cmd, **kw)
-    if r.returncode != 0:
-        sys.exit(f"stereo: step failed ({cmd[0]}, exit {r.returncode})")
-    log(f"  ({time.monotonic() - t:.0f} s)")
-    return r
 
 
 def parse_args(argv=None):
