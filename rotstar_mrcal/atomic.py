@@ -17,6 +17,12 @@ SYNOPSIS
     ...     pass
     >>> os.listdir(d)                                 # nothing half-written left behind
     ['a.txt']
+    >>> try:                                          # a failed write names the file meant, not the temporary one
+    ...     with atomic_write(os.path.join(d, "c.txt")) as f:
+    ...         raise OSError(28, "No space left on device")
+    ... except OSError as e:
+    ...     print(os.path.basename(e.filename), e.strerror, os.listdir(d))
+    c.txt No space left on device ['a.txt']
 
 The temporary name is hidden (a leading dot) and unique per process, so
 readers that list a folder (dataset.list_poses) never see it.
@@ -39,9 +45,11 @@ def atomic_path(path: str):
     try:
         yield tmp
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(OSError):
             os.remove(tmp)
+        if isinstance(e, OSError) and e.filename in (None, tmp):  # (a full disk: named by the file meant)
+            raise OSError(e.errno, e.strerror or str(e), path) from e
         raise
 
 

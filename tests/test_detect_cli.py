@@ -404,7 +404,7 @@ def test_printed_mrcal_command(bad_run, bad_seq, d435_seq):
 def test_help(run_cli):
     r = run_cli("rotstar-detect", "--help")
     assert r.returncode == 0 and r.stderr == ""
-    for word in ("--jobs", "--refine", "--weights", "--window", "--max-motion", "pattern.json", "Exit status"):
+    for word in ("--jobs", "--refine", "--weights", "--window", "--max-motion", "pattern.json", "exit status:"):
         assert word in r.stdout
 
 

@@ -11,7 +11,7 @@ import sys
 from .. import dataset
 from ..validate import calibrate as cal
 from ..validate.sources import SourceError, load_corner_set
-from .common import atomic_write, make_folder, run, say
+from .common import HelpFormatter, atomic_write, exit_status_help, make_folder, run, say
 
 DESCRIPTION = f"""\
 Calibrate a camera from a rotating-star dataset with mrcal: detect the
@@ -44,10 +44,6 @@ intrinsics and extrinsics (camera 0 at the origin); the report gives each
 camera's residuals, outliers and where it is relative to camera 0. A camera
 with more than {100 * cal.MAX_OUTLIER_FRACTION:.0f}% outliers, or a board mrcal mostly rejects (labelled
 differently than in the other cameras), fails the checks.
-
-Exit status (also 130: interrupted): 0 a model was written and passed its checks (or --keep);
-1 the calibration ran and failed (mrcal failed, or the checks); 2 bad
-arguments or inputs that cannot give a model.
 """
 
 EPILOG = """\
@@ -55,12 +51,15 @@ examples:
   rotstar-calibrate seq/ --outdir cal/                 # detect, then calibrate (lean, splined if supported)
   rotstar-calibrate seq/ --lensmodel opencv5 --weights # one given model, per-corner weights
   rotstar-calibrate seq/ --corners corners.vnl         # corners from rotstar-detect (or any detector)
-"""
+
+""" + exit_status_help("a model was written and passed its checks (or --keep)",
+                       failed="the calibration ran and failed (mrcal failed, or the checks)",
+                       bad="inputs that cannot give a model") + "\n"
 
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-calibrate", description=DESCRIPTION, epilog=EPILOG,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+                                formatter_class=HelpFormatter)
     p.add_argument("seq", help="dataset folder holding pattern.json and one folder per pose")
     p.add_argument("--corners", metavar="VNL", help="use this corners.vnl instead of detecting")
     p.add_argument("--outdir", default="cal", help="where the model (camera-0.cameramodel), calibration.json, "

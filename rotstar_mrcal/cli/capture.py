@@ -20,7 +20,7 @@ from ..capture.session import OutputDataset, SessionOptions, capture_one, next_f
 from ..capture.source import CaptureError, ControlError, FrameSource, skip
 from ..display.loop import player_loop
 from ..display.player import DEFAULT_HOLD
-from .common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_INTERRUPTED, atomic_write, check_output_path, fail, run, \
+from .common import EXIT_FAILED, HelpFormatter, exit_status_help, EXIT_INTERRUPTED, atomic_write, check_output_path, fail, run, \
     say, size_arg
 from .segment_args import add_segment_options, options_from
 
@@ -75,7 +75,7 @@ examples:
   rotstar-capture --pattern pattern/ --out rig --stereo --rgb-device /dev/video4 --rgb-exposure 300
   rotstar-detect seq/exp4000us > corners.vnl
 
-""" + EXIT_CODES_HELP + " (a camera that cannot be opened or set: 1)\n"
+""" + exit_status_help("done", failed="a camera that cannot be opened or set, or no pose written") + "\n"
 
 
 def _exposures(s: str) -> list[int]:
@@ -90,7 +90,7 @@ def _exposures(s: str) -> list[int]:
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-capture", description=DESCRIPTION, epilog=EPILOG,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+                                formatter_class=HelpFormatter)
     p.add_argument("--list", action="store_true",
                    help="list every video node (USB id, formats, sizes, frame rates, controls, D4xx "
                         "extension-unit values) on stdout and exit")

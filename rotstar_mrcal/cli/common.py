@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import math
 import os
 import signal
 import sys
+import textwrap
 import threading
 import time
 from typing import NoReturn
@@ -79,8 +82,52 @@ EXIT_FAILED = 1  # the job ran but failed, or its result is partial
 EXIT_BAD_INPUT = 2  # bad input or arguments (argparse's own code)
 EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM (128 + SIGINT, as a shell reports it)
 
-EXIT_CODES_HELP = ("exit status: 0 done; 1 the job ran but failed or its result is partial; "
-                   "2 bad input or arguments; 130 interrupted (Ctrl-C, SIGTERM)")
+
+
+def exit_status_help(done: str = "done", failed: str = "the job ran but failed or its result is partial",
+                     bad: str = "") -> str:
+    """The 'exit status:' paragraph of a command's --help (its epilog): the codes run() gives
+    (1 also when an output cannot be written, 2 for bad input, 130 when interrupted), each with
+    what it means for this command; wrapped as argparse would
+
+    SYNOPSIS
+
+        >>> print(exit_status_help("written", bad="an unreadable results.json"))
+        exit status: 0 written; 1 the job ran but failed or its result is partial, or
+        an output cannot be written; 2 bad input or arguments (an unreadable
+        results.json); 130 interrupted (Ctrl-C, SIGTERM)
+    """
+    text = (f"exit status: 0 {done}; 1 {failed}, or an output cannot be written; "
+            f"2 bad input or arguments{f' ({bad})' if bad else ''}; 130 interrupted (Ctrl-C, SIGTERM)")
+    return textwrap.fill(text, 78)
+
+
+EXIT_CODES_HELP = exit_status_help()
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Every command's --help: description and epilog as written; an option's default shown
+    as '(default: X)' only where it says something (not None, not a flag's False, not when the
+    help text gives it already)
+
+    SYNOPSIS
+
+        >>> p = argparse.ArgumentParser(prog="x", formatter_class=HelpFormatter)
+        >>> _ = p.add_argument("--n", type=int, default=3, help="count")
+        >>> _ = p.add_argument("--out", help="output file")
+        >>> _ = p.add_argument("--quick", action="store_true", help="fewer cases")
+        >>> _ = p.add_argument("--perturb", type=float, default=0.0, help="px")
+        >>> h = p.format_help()
+        >>> "count (default: 3)" in h, "px (default: 0.0)" in h, "default: None" in h, "default: False" in h
+        (True, True, False, False)
+    """
+
+    def _get_help_string(self, action):
+        h = action.help or ""
+        if ("default" in h.lower() or any(action.default is v for v in (None, False, True, argparse.SUPPRESS))
+                or not action.option_strings or action.default == []):
+            return h
+        return h + " (default: %(default)s)"
 
 
 class Failure(Exception):
@@ -115,17 +162,73 @@ def run(prog: str, main_fn, argv=None) -> int:
     """
     main_thread = threading.current_thread() is threading.main_thread()  # (signal handlers live there)
     old = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
+    real_stdout, sys.stdout = sys.stdout, _NamedStdout(sys.stdout)
     try:
-        return main_fn(argv)
+        code = main_fn(argv)
+        sys.stdout.flush()  # a write to stdout that fails (a full disk, a closed pipe) fails here, not at exit
+        return code
     except Failure as e:
         say(f"{prog}: {e}")
         return e.code
     except KeyboardInterrupt:
         say(f"{prog}: interrupted")
         return EXIT_INTERRUPTED
+    except OSError as e:  # a write (or a read) the command did not expect to fail
+        say(f"{prog}: {os_error_line(e)}")
+        if e.filename == STDOUT:
+            _silence_stdout()
+        return EXIT_FAILED
     finally:
+        sys.stdout = real_stdout
         if main_thread:
             signal.signal(signal.SIGTERM, old)
+
+
+STDOUT = "standard output"
+
+
+def os_error_line(e: OSError) -> str:
+    """'file: reason' for an OSError ('standard output: reason' for a write to stdout that failed)
+
+    SYNOPSIS
+
+        >>> os_error_line(OSError(28, "No space left on device", "cal/calibration.json"))
+        'cal/calibration.json: No space left on device'
+    """
+    return f"{e.filename}: {e.strerror or e}" if e.filename is not None else str(e.strerror or e)
+
+
+class _NamedStdout:
+    """sys.stdout during run(): a write or flush that fails raises an OSError named 'standard output'"""
+
+    def __init__(self, f):
+        self._f = f
+
+    def _named(self, fn, *args):
+        try:
+            return fn(*args)
+        except OSError as e:
+            raise OSError(e.errno, e.strerror or str(e), STDOUT) from e
+
+    def write(self, s):
+        return self._named(self._f.write, s)
+
+    def writelines(self, lines):
+        return self._named(self._f.writelines, lines)
+
+    def flush(self):
+        return self._named(self._f.flush)
+
+    def __getattr__(self, name):
+        return getattr(self._f, name)
+
+
+def _silence_stdout() -> None:
+    """stdout to /dev/null, so that Python's own flush at exit does not fail again on what is left"""
+    with contextlib.suppress(OSError, ValueError, AttributeError, io.UnsupportedOperation):  # (a test's capture)
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
 
 
 # ---- output paths --------------------------------------------------------------------------

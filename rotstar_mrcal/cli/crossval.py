@@ -17,7 +17,7 @@ from ..validate.cornersets import dataset_methods
 from ..validate.detection import detect_dataset as _detect_dataset
 from ..validate.detection import split_interleaved
 from ..validate.sources import SourceError, load_corner_set, load_model
-from .common import Progress, atomic_write, make_folder, run, say
+from .common import HelpFormatter, Progress, exit_status_help, atomic_write, make_folder, run, say
 
 DESCRIPTION = """\
 Validate calibrations the way the rotating-star paper and mrcal do it.
@@ -51,10 +51,6 @@ one or more such folders into a report.
 
 The lens model defaults to rotstar-calibrate's lean model
 (LENSMODEL_OPENCV8, the model of rotstar-detect's printed command).
-
-Exit status (also 130: interrupted): 0 done; 1 some corner set could not be calibrated (the others
-are reported); 2 bad arguments or inputs (a missing or unreadable model, a
-model of another imager size than the test corners).
 """
 
 EPILOG = f"""\
@@ -66,12 +62,15 @@ examples:
   rotstar-crossval groupA/ groupB/ --lensmodel opencv8 --outdir xval/
   rotstar-crossval groupA/ groupB/ --methods all --outdir xval/ --label "4000 us"
   rotstar-crossval --set rotstar A/rotstar.vnl B/rotstar.vnl --set mrgingham A/mrg.vnl B/mrg.vnl
-"""
+
+""" + exit_status_help("done", failed="some corner set could not be calibrated (the others are reported)",
+                       bad="a missing or unreadable model, a model of another imager size than the test "
+                           "corners") + "\n"
 
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-crossval", description=DESCRIPTION, epilog=EPILOG,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+                                formatter_class=HelpFormatter)
     p.add_argument("inputs", nargs="*", help="MODEL TEST, MODEL_A MODEL_B, SEQ, or A B (datasets or corners.vnl)")
     p.add_argument("--set", nargs=3, action="append", default=[], metavar=("NAME", "A", "B"),
                    help="a named corner set of both groups (corners.vnl files); repeatable")

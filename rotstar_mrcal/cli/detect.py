@@ -13,7 +13,7 @@ from ..methods import METHODS, REFINERS
 from ..detect.run import detect_dataset
 from ..focal import estimate_focal
 from ..vnl import write_corners
-from .common import (EXIT_CODES_HELP, EXIT_FAILED, Progress, atomic_write, check_output_path, fail, number_arg, run,
+from .common import (EXIT_FAILED, HelpFormatter, exit_status_help, Progress, atomic_write, check_output_path, fail, number_arg, run,
                      say)
 
 DESCRIPTION = """\
@@ -32,10 +32,6 @@ camera's poses are detected and written into the one corners.vnl (filename
 column SEQ/poseNNN/camera-K/<first rotating-star frame>), every camera
 labelling each board the same way (checked per pose across the cameras);
 the printed command has one glob per camera and one focal seed per camera.
-
-Exit status: 0 when at least one pose gave a board (with several cameras:
-when every camera gave the >= 2 boards mrcal needs), 1 when none did, 2 for
-a dataset that cannot be read at all.
 """
 
 EPILOG = """\
@@ -43,7 +39,10 @@ example:
   rotstar-detect seq/ > corners.vnl
   mrcal-calibrate-cameras --corners-cache corners.vnl ...   (printed on stderr)
 
-""" + EXIT_CODES_HELP + "\n"
+""" + exit_status_help(
+    "at least one pose gave a board (with several cameras: every camera gave the >= 2 boards mrcal needs)",
+    failed="no pose did, or --method phase|star fell back to the rotating-star corners",
+    bad="a dataset that cannot be read at all") + "\n"
 
 
 DETECT_METHODS = ["rotstar"] + [n for n, m in METHODS.items() if m.start == "rotstar"]
@@ -51,7 +50,7 @@ DETECT_METHODS = ["rotstar"] + [n for n, m in METHODS.items() if m.start == "rot
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-detect", description=DESCRIPTION, epilog=EPILOG,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+                                formatter_class=HelpFormatter)
     p.add_argument("seq", help="dataset folder holding pattern.json and one folder per pose")
     p.add_argument("-o", "--output", help="write corners.vnl here instead of stdout")
     p.add_argument("--window", type=number_arg(float, MIN_WINDOW), default=10.0,

@@ -12,8 +12,8 @@ import cv2
 from ..display.player import write_player
 from ..pattern.layout import make_layout
 from ..pattern.render import encode_display, render_frame
-from .common import EXIT_CODES_HELP, EXIT_FAILED, atomic_path, atomic_write, check_output_path, fail, number_arg, \
-    run, say, size_arg
+from .common import EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, fail, number_arg, \
+    exit_status_help, run, say, size_arg
 
 DESCRIPTION = """\
 Write the rotating-star display sequence for one screen: NFRAMES frames in
@@ -49,8 +49,8 @@ def _angle(s: str) -> float:
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(prog="rotstar-pattern", description=DESCRIPTION, epilog=EXIT_CODES_HELP,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(prog="rotstar-pattern", description=DESCRIPTION, epilog=exit_status_help("written", failed="a frame cannot be written"),
+                                formatter_class=HelpFormatter)
     p.add_argument("--out", "-o", default="pattern", help="output folder (default ./pattern)")
     p.add_argument("--screen", type=size_arg, default=(2360, 1640), help="screen size in display pixels (default 2360x1640)")
     g = p.add_mutually_exclusive_group()

@@ -8,7 +8,7 @@ import os
 import sys
 
 from ..validate import reportdir
-from .common import run, say
+from .common import EXIT_FAILED, HelpFormatter, exit_status_help, fail, make_folder, run, say
 
 DESCRIPTION = """\
 Build the validation report from one or more rotstar-crossval output folders
@@ -39,15 +39,15 @@ claims (4.2) as verdicts with their numbers (rotstar_mrcal.validate.claims).
 stdout: the headline table and the verdict (Markdown), for pasting, and the
 paper's claims in one line each when they apply;
 stderr: the files written and the mrcal-show-* commands.
-
-Exit status (also 130: interrupted): 0 written; 2 bad arguments (an unreadable results.json,
-duplicate labels, an --out that cannot be a folder).
 """
+
+EPILOG = exit_status_help("written", failed="a figure or page could not be made",
+                          bad="an unreadable results.json, duplicate labels, an --out that cannot be a folder") + "\n"
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(prog="rotstar-report", description=DESCRIPTION,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(prog="rotstar-report", description=DESCRIPTION, epilog=EPILOG,
+                                formatter_class=HelpFormatter)
     p.add_argument("xval", nargs="+", help="rotstar-crossval --outdir folders (or their results.json); "
                    "make stereo's stereo folder")
     p.add_argument("--out", default="report", help="report folder (default report)")
@@ -70,15 +70,14 @@ def _main(argv=None) -> int:
     except (OSError, ValueError, json.JSONDecodeError) as e:
         say(f"rotstar-report: {e}")
         return 2
-    try:
-        os.makedirs(a.out, exist_ok=True)
-    except (FileExistsError, NotADirectoryError):
-        say(f"rotstar-report: --out {a.out}: a file is in the way (not a folder)")
-        return 2
     notes = ""
     if a.notes:
-        with open(a.notes) as f:
-            notes = f.read()
+        try:
+            with open(a.notes) as f:
+                notes = f.read()
+        except (OSError, UnicodeDecodeError) as e:
+            fail(f"--notes {a.notes}: {getattr(e, 'strerror', None) or e}")
+    make_folder(a.out, "--out")
     try:
         written = reportdir.build_report([r for r, _ in loaded], [d for _, d in loaded], a.out, a.title, notes,
                                          a.figure, mrcal_figures=not a.no_mrcal_figures,
@@ -86,6 +85,8 @@ def _main(argv=None) -> int:
     except ValueError as e:
         say(f"rotstar-report: {e}")
         return 2
+    except OSError as e:  # (a full disk: the file, or at least the report folder)
+        fail(f"{e.filename or a.out}: {e.strerror or e}", EXIT_FAILED)
     say(f"rotstar-report: wrote {written['index.html']} and {written['index.md']}")
     with open(written["headline.md"]) as f:
         sys.stdout.write(f.read())

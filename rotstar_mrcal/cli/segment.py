@@ -18,7 +18,7 @@ from ..capture.rig_segment import check_recordings, segment_rig
 from ..capture.segment import SegmentError, segment
 from ..capture.source import CaptureError
 from .segment_args import add_segment_options, options_from
-from .common import EXIT_FAILED, atomic_path, atomic_write, check_output_path, fail, run, say, size_arg
+from .common import EXIT_FAILED, HelpFormatter, exit_status_help, atomic_path, atomic_write, check_output_path, fail, run, say, size_arg
 
 DESCRIPTION = """\
 Split a continuous recording of player.html (the start marker, then every
@@ -51,8 +51,6 @@ hold the same number of frames (one per lockstep step), and every frame of
 one camera the same size; otherwise a one-line error (exit 2).
 
 Progress and the verdict go to stderr; stdout gets the pose folder only.
-Exit status: 0 written, 1 the recording cannot be split (the reason is
-printed), 2 bad input or arguments, 130 interrupted.
 """
 
 EPILOG = """\
@@ -61,12 +59,13 @@ examples:
   rotstar-detect seq/ > corners.vnl
   rotstar-segment seq/raw/pose000_exp4000us/ --pattern pattern/ --out stereo/pose000     # camera-0, camera-1, ...
   rotstar-segment left.npy right.npy colour.npy --pattern pattern/ --out stereo/pose000
-"""
+
+""" + exit_status_help("written", failed="the recording cannot be split (the reason is printed)") + "\n"
 
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-segment", description=DESCRIPTION, epilog=EPILOG,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+                                formatter_class=HelpFormatter)
     p.add_argument("recording", nargs="+",
                    help="folder of frames, .npy, .raw or video file; several (one per camera, in camera order), or a "
                         "folder of camera-<k>.npy recordings: the cameras of a rig")

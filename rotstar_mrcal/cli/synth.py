@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from .common import EXIT_CODES_HELP, atomic_path, atomic_write, check_output_path, fail, number_arg, run, say
+from .common import HelpFormatter, exit_status_help, atomic_path, atomic_write, check_output_path, fail, number_arg, run, say
 
 
 def _floats(xs):
@@ -52,7 +52,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
     d = Protocol()
     p = argparse.ArgumentParser(prog="rotstar-synth", description=__doc__.split("\n\n")[0].split(": ", 1)[1],
-                                epilog=EXIT_CODES_HELP, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                epilog=exit_status_help("done"), formatter_class=HelpFormatter)
     sub = p.add_subparsers(dest="command", required=True)
 
     def protocol_args(q, full=True):
@@ -88,7 +88,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         q.add_argument("--seed", type=int, default=d.seed)
 
     e = sub.add_parser("experiment", help="run the experiment, write table, plots and summary",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       formatter_class=HelpFormatter)
     protocol_args(e)
     e.add_argument("--quick", action="store_true",
                    help="2 tilts (20, 50), 6 directions, 4 repeats, noise 0 and 4: under a minute "
@@ -100,11 +100,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     e.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
 
     s = sub.add_parser("psf", help="statistics of each aberration's PSF",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       formatter_class=HelpFormatter)
     protocol_args(s, full=False)
 
     b = sub.add_parser("bound", help="Cramer-Rao bound per pattern against a Gaussian blur (head-on)",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       formatter_class=HelpFormatter)
     b.add_argument("--sigmas", nargs="+", type=float, default=[0.5, 1.0, 2.0, 3.0], help="Gaussian sigma_b, px")
     b.add_argument("--noise", type=float, default=2.0, help="sigma_n, DN")
     b.add_argument("--window", type=int, default=10)
