@@ -51,7 +51,7 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
-from rotstar_mrcal.steps import log, run_step, short_path  # noqa: E402
+from rotstar_mrcal.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
 
 
 def run(cmd, **kw):
@@ -137,10 +137,11 @@ def crossval_and_report(a, out: str, found: dict, crops: dict) -> tuple[str, str
     return rep, run(cmd, stdout=subprocess.PIPE, text=True).stdout
 
 
-def write_docs(headline: str, rep: str) -> None:
+def write_docs(headline: str, rep: str, seconds: float) -> None:
     """The headline table into the marked blocks of README.md and doc/validation.md; the report's verdicts
     and the paper's claims in short into README.md (demo:claims), whole with the table by tilt (the report's paper.md) into
-    doc/validation.md (demo:paper); the report's figure against the truth as doc/img/demo-vs-truth.png"""
+    doc/validation.md (demo:paper); the report's figure against the truth as doc/img/demo-vs-truth.png; the run's
+    wall time (seconds) and cores into README.md (demo:time)"""
     from rotstar_mrcal.docblock import rewrite_block
 
     lines = headline.splitlines()
@@ -151,7 +152,8 @@ def write_docs(headline: str, rep: str) -> None:
         paper = f.read().replace("## ", "### ")  # sections below doc/validation.md's "The demo"
     readme, validation = os.path.join(ROOT, "README.md"), os.path.join(ROOT, "doc", "validation.md")
     for path, name, text in ((readme, "demo:headline", table), (validation, "demo:headline", table),
-                             (readme, "demo:claims", claims), (validation, "demo:paper", paper)):
+                             (readme, "demo:claims", claims), (validation, "demo:paper", paper),
+                             (readme, "demo:time", wall_time_note(seconds, os.cpu_count() or 1))):
         if rewrite_block(path, name, text):
             log(f"rewrote the block {name} of {os.path.relpath(path)}")
     fig = os.path.join(ROOT, "doc", "img", "demo-vs-truth.png")  # README's figure: the report's, redrawn
@@ -167,6 +169,7 @@ def main(argv=None) -> int:
     t0 = time.monotonic()
     out = os.path.abspath(a.out)
     os.makedirs(out, exist_ok=True)
+    clock = start_clock(os.path.join(out, ".steps-quick.json" if a.quick else ".steps.json"))  # (time left)
     for k, _ in EXPOSURES:  # a previous run's square-board images would be read by mrgingham again
         shutil.rmtree(exposure_dir(out, k), ignore_errors=True)
     found, crops = corner_sets(a, out)
@@ -177,7 +180,8 @@ def main(argv=None) -> int:
     print()
     print(headline.rstrip())
     if not (a.no_docs or a.quick or a.seed != DEFAULT_SEED):
-        write_docs(headline, rep)
+        write_docs(headline, rep, clock.elapsed())
+    clock.finish()
     return 0
 
 

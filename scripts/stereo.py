@@ -56,7 +56,7 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
-from rotstar_mrcal.steps import log, run_step, short_path  # noqa: E402
+from rotstar_mrcal.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
 
 
 def run(cmd, **kw):
@@ -195,8 +195,9 @@ def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
             "distances": sorted(pts), "seed": a.seed, "poses": a.poses, "rgb": a.rgb, "methods": methods}
 
 
-def write_docs(result: dict) -> None:
-    """The tables into doc/validation.md (stereo:tables) and the headline into README.md (stereo:headline)"""
+def write_docs(result: dict, seconds: float) -> None:
+    """The tables into doc/validation.md (stereo:tables), the headline into README.md (stereo:headline) and
+    the run's wall time (seconds) and cores under it (stereo:time)"""
     from rotstar_mrcal.docblock import rewrite_block
     from rotstar_mrcal.validate import stereoreport
 
@@ -205,7 +206,8 @@ def write_docs(result: dict) -> None:
                                       for title, t in stereoreport.tables(result))
     short = stereoreport.headline(result).markdown() + "\n\n" + said
     for path, name, text in ((os.path.join(ROOT, "doc", "validation.md"), "stereo:tables", full),
-                             (os.path.join(ROOT, "README.md"), "stereo:headline", short)):
+                             (os.path.join(ROOT, "README.md"), "stereo:headline", short),
+                             (os.path.join(ROOT, "README.md"), "stereo:time", wall_time_note(seconds, os.cpu_count() or 1))):
         if rewrite_block(path, name, text):
             log(f"rewrote the block {name} of {os.path.relpath(path, ROOT)}")
 
@@ -223,6 +225,7 @@ def main(argv=None) -> int:
     for sub in ("pattern", "seq", "A", "B", "cal", "stereo", "report"):  # a previous run's
         shutil.rmtree(os.path.join(out, sub), ignore_errors=True)
     os.makedirs(out, exist_ok=True)
+    clock = start_clock(os.path.join(out, ".steps-quick.json" if a.quick else ".steps.json"))  # (time left)
     seq, ncam = simulate(a, out)
     cals, vnls = calibrate(a, out, ncam)
     result = evaluate(a, out, seq, cals, vnls)
@@ -241,7 +244,8 @@ def main(argv=None) -> int:
     print()
     print(stereoreport.section(result))
     if not (a.no_docs or a.quick or a.rgb or a.seed != DEFAULT_SEED or not full):
-        write_docs(result)
+        write_docs(result, clock.elapsed())
+    clock.finish()
     return 0
 
 
