@@ -126,3 +126,16 @@ def test_report_on_a_full_disk(results, tmp_path):
     r = cli("rotstar-report", results, "--out", tmp_path / "rep", limit=1000)
     assert r.returncode == 1 and error_line(r).startswith(f"rotstar-report: {tmp_path / 'rep'}")
     assert error_line(r).endswith(": File too large") and r.stdout == ""
+
+
+# ---- every command run is printed ----------------------------------------------------------
+def test_crossval_prints_the_detection_it_runs(seq, tmp_path, capsys):
+    """rotstar-crossval's in-process detection is printed as the rotstar-detect command that gives the same corners"""
+    from rotstar_mrcal.cli import crossval
+
+    vnl = crossval.detect_dataset(seq, ["rotstar"], str(tmp_path / "x"), "A")["rotstar"]
+    cmd = [line for line in capsys.readouterr().err.splitlines() if line.startswith("$ ")]
+    assert cmd == [f"$ rotstar-detect {seq} --method rotstar -o {vnl}    # (run here, in this process)"]
+    again = str(tmp_path / "again.vnl")
+    r = cli("rotstar-detect", *cmd[0].split("#")[0].split()[2:-1], again)
+    assert r.returncode == 0 and open(again).read() == open(vnl).read()

@@ -49,7 +49,7 @@ differently than in the other cameras), fails the checks.
 EPILOG = """\
 examples:
   rotstar-calibrate seq/ --outdir cal/                 # detect, then calibrate (lean, splined if supported)
-  rotstar-calibrate seq/ --lensmodel opencv5 --weights # one given model, per-corner weights
+  rotstar-calibrate seq/ --outdir cal-opencv5/ --lensmodel opencv5 --weights   # one given model, per-corner weights
   rotstar-calibrate seq/ --corners corners.vnl         # corners from rotstar-detect (or any detector)
 
 """ + exit_status_help("a model was written and passed its checks (or --keep)",

@@ -112,9 +112,26 @@ def _write_json(obj, path=None):
             f.write(text)
 
 
+def detect_commands(seq: str, methods, outdir: str, side: str) -> list[str]:
+    """The rotstar-detect commands that write the corners detect_dataset writes here, in this
+    process (the methods rotstar-detect has; the other detectors have no command of ours)
+
+    SYNOPSIS
+
+        >>> detect_commands("seq", ["rotstar", "mrgingham"], "xval", "A")
+        ['rotstar-detect seq --method rotstar -o xval/rotstar/A.vnl']
+    """
+    from .detect import DETECT_METHODS
+
+    return [cal.command_line(["rotstar-detect", seq, "--method", m, "-o", os.path.join(outdir, m, f"{side}.vnl")])
+            for m in methods if m in DETECT_METHODS]
+
+
 def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1) -> dict[str, str]:
-    """validate.detection.detect_dataset with progress lines on stderr"""
+    """validate.detection.detect_dataset with progress lines on stderr, after the commands that do the same"""
     n = len(dataset.list_poses(seq))
+    for c in detect_commands(seq, methods, outdir, side):
+        say(f"$ {c}    # (run here, in this process)")
     say(f"rotstar-crossval: detecting {', '.join(methods)} on {seq} ({n} poses)")
     progress = Progress(n)
     return _detect_dataset(seq, methods, outdir, side, jobs, progress=progress.step,
