@@ -29,7 +29,7 @@ ifeq ($(UV),)
 UV := $(CURDIR)/.tools/bin/uv
 endif
 
-.PHONY: help setup test demo stereo bench calib-bench coverage-bench pip-check clean check-python system-deps
+.PHONY: help setup test demo stereo bench calib-bench coverage-bench pip-check clean check-python system-deps python
 
 help:
 	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
@@ -39,6 +39,9 @@ help:
 	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses)"
 	@echo "make coverage-bench - mrcal's uncertainty with and without boards hanging over the imager's edges"
 	@echo "make pip-check   - install with plain pip (scripts/pip_install.sh) into a fresh venv and check it"
+
+python: check-python  ## the Python >= 3.12 the set-up uses (the plain-pip path of README.md uses it too)
+	@echo $(PYTHON)
 
 check-python:
 	@if [ -z "$(PYTHON)" ]; then \

@@ -1,6 +1,6 @@
 #!/bin/sh
 # Install rotstar-mrcal with plain pip (no uv) into a new virtualenv:
-#   scripts/pip_install.sh [VENV]        (default: venv; PYTHON=python3.12 by default)
+#   scripts/pip_install.sh [VENV]        (default: venv; PYTHON: the Python >= 3.12 `make python` finds)
 # mrcal's wheel declares pyfltk, whose only release here is a source package that
 # needs FLTK 1.4 to build ("fltk-config not found"); the wheel already vendors the
 # fltk module, so mrcal is installed without its declared dependencies, then those
@@ -8,8 +8,8 @@
 # resolve mrcal's again) and then this package's own dependencies.
 set -e
 V=${1:-venv}
-PY=${PYTHON:-python3.12}
 HERE=$(cd "$(dirname "$0")/.." && pwd)
+PY=${PYTHON:-$(make -s -C "$HERE" python)}
 "$PY" -m venv "$V"
 "$V/bin/pip" install -q --upgrade pip
 "$V/bin/pip" install -q --no-deps mrcal
