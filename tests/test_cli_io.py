@@ -139,3 +139,8 @@ def test_crossval_prints_the_detection_it_runs(seq, tmp_path, capsys):
     again = str(tmp_path / "again.vnl")
     r = cli("rotstar-detect", *cmd[0].split("#")[0].split()[2:-1], again)
     assert r.returncode == 0 and open(again).read() == open(vnl).read()
+
+
+def test_pattern_into_a_folder_that_cannot_be_made():
+    r = cli("rotstar-pattern", "--out", "/sys/rotstar-pattern")
+    assert r.returncode == 2 and error_line(r) == "rotstar-pattern: --out /sys/rotstar-pattern: Operation not permitted"

@@ -191,7 +191,7 @@ def mode_models(a, path_a: str, path_b: str) -> int:
     cv = cross_validate(ma, mb, gridn_width=a.gridn, distance=a.distance)
     s = cv.summary()
     if a.outdir:
-        os.makedirs(a.outdir, exist_ok=True)
+        make_folder(a.outdir)
         fig = plots.heatmaps(cv.q, [("|projection diff| A vs B", cv.diff), ("uncertainty A (1-sigma)", cv.u0),
                                     ("uncertainty B (1-sigma)", cv.u1)], ma.imagersize())
         fn = os.path.join(a.outdir, "crossval.png")

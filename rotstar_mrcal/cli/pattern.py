@@ -12,8 +12,8 @@ import cv2
 from ..display.player import write_player
 from ..pattern.layout import make_layout
 from ..pattern.render import encode_display, render_frame
-from .common import EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, fail, number_arg, \
-    exit_status_help, run, say, size_arg
+from .common import EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, exit_status_help, fail, \
+    make_folder, number_arg, run, say, size_arg
 
 DESCRIPTION = """\
 Write the rotating-star display sequence for one screen: NFRAMES frames in
@@ -106,7 +106,7 @@ def _main(argv=None) -> int:
     except ValueError as e:
         fail(str(e).replace("leave the identity frames out", "add --no-identity"))
     check_output_path(a.out, folder=True)
-    os.makedirs(a.out, exist_ok=True)
+    make_folder(a.out, "--out")
     frames = layout.frames()
     for k, f in enumerate(frames):
         fn = os.path.join(a.out, f["file"])
