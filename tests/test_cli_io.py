@@ -124,8 +124,9 @@ def test_report_into_a_folder_that_cannot_be_made(results):
 
 def test_report_on_a_full_disk(results, tmp_path):
     r = cli("rotstar-report", results, "--out", tmp_path / "rep", limit=1000)
-    assert r.returncode == 1 and error_line(r).startswith(f"rotstar-report: {tmp_path / 'rep'}")
-    assert error_line(r).endswith(": File too large") and r.stdout == ""
+    named = re.fullmatch(r"rotstar-report: (.*): File too large", error_line(r))
+    assert r.returncode == 1 and named and os.path.dirname(named.group(1)) == str(tmp_path / "rep"), r.stderr
+    assert r.stdout == "" and not [f for f in os.listdir(tmp_path / "rep") if f.startswith(".")]  # no temporary file
 
 
 # ---- every command run is printed ----------------------------------------------------------

@@ -30,7 +30,7 @@ import os
 import re
 import shutil
 
-from ..atomic import atomic_write
+from ..atomic import atomic_path, atomic_write
 from . import plots, stereoreport
 from .groups import Comparison
 from .claims import claims, short_lines
@@ -116,7 +116,8 @@ def build_report(results, dirs, out: str, title: str, notes: str = "", extra_fig
 
     def bars(kind, panels, ylabel, fn, caption, at):
         fig = plots.summary_bars(labels, [(title, series(kind, key)) for title, key in panels], ylabel)
-        fig.savefig(os.path.join(out, fn), dpi=110)
+        with atomic_path(os.path.join(out, fn)) as tmp:  # (a full disk: no half-written figure, the file named)
+            fig.savefig(tmp, dpi=110)
         plt.close(fig)
         figures.insert(at, (caption, fn))
 
