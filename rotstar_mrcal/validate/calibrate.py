@@ -201,7 +201,9 @@ def image_glob(filenames) -> str:
 
 def vnl_has_weights(path: str) -> bool:
     """Does a corners.vnl say (in its `# filename x y ...` header) that column 4 is a weight?"""
-    with open(path, encoding="ascii", errors="replace") as f:
+    from ..vnl import open_corners
+
+    with open_corners(path) as f:
         for line in f:
             s = line.strip()
             if not s:
@@ -212,6 +214,39 @@ def vnl_has_weights(path: str) -> bool:
             if fields[:3] == ["filename", "x", "y"]:
                 return len(fields) > 3 and fields[3] == "weight"
     return False
+
+
+def mrcal_corners(vnl: str, folder: str, drop=()) -> str:
+    """The corners file to hand mrcal: vnl itself when mrcal reads it as we do, else a copy in folder
+
+    The copy (folder/corners.vnl, written atomically) is the text we read
+    (vnl.corners_text: LF line ends, ASCII, no byte-order mark) without the
+    rows of the image names in drop. CornersFileError for a file that is not
+    such text.
+
+    SYNOPSIS
+
+        >>> import tempfile
+        >>> d = tempfile.mkdtemp(); fn = os.path.join(d, "c.vnl")
+        >>> _ = open(fn, "wb").write(b"# filename x y level\\r\\na/r.png 1 2 0.5\\r\\nb/r.png 3 4 0.5\\r\\n")
+        >>> out = mrcal_corners(fn, os.path.join(d, "m"), drop={"b/r.png"})
+        >>> out == os.path.join(d, "m", "corners.vnl"), open(out, "rb").read()
+        (True, b'# filename x y level\\na/r.png 1 2 0.5\\n')
+    """
+    from ..vnl import corners_text
+
+    with open(vnl, "rb") as f:
+        data = f.read()
+    text = corners_text(data, vnl)
+    if text is None and not drop:
+        return vnl
+    text = data.decode("ascii") if text is None else text
+    keep = [line for line in text.splitlines(keepends=True) if not (line.split()[:1] and line.split()[0] in drop)]
+    out = os.path.join(folder, "corners.vnl")
+    os.makedirs(folder, exist_ok=True)
+    with atomic_path(out) as tmp, open(tmp, "w", encoding="ascii", newline="\n") as f:
+        f.write("".join(keep))
+    return out
 
 
 def calibrate_argv(vnl: str, layout, imagersize, focal: float, lensmodel: str, outdir: str,
@@ -459,10 +494,10 @@ def splined_supported(cs, knots_x: int = DEFAULT_KNOTS_X) -> tuple[bool, str]:
     return True, f"{n} boards covering {100 * c:.0f}% of the imager"
 
 
-def calibration_argv(cs, outdir: str, lensmodel: str, focal: float | None = None) -> list[str]:
-    """The mrcal-calibrate-cameras command for a corner set (sources.CornerSet)"""
+def calibration_argv(cs, outdir: str, lensmodel: str, focal: float | None = None, vnl: str | None = None) -> list[str]:
+    """The mrcal-calibrate-cameras command for a corner set (sources.CornerSet); vnl: mrcal's copy (mrcal_corners)"""
     focal = focal_seed(cs, check=False) if focal is None else focal
-    return calibrate_argv(cs.vnl, cs.layout, cs.imagersize, focal, lensmodel, outdir,
+    return calibrate_argv(vnl or cs.vnl, cs.layout, cs.imagersize, focal, lensmodel, outdir,
                           image_glob(cs.files), weights=cs.weights)
 
 
@@ -760,9 +795,12 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
             log(f"splined model supported ({why}): fitting it after the lean one")
         else:
             log(f"lean model only: {why}")
+    vnl = mrcal_corners(cs.vnl, os.path.join(outdir, "candidates"))
+    if vnl != cs.vnl:
+        log(f"{cs.vnl} is not plain ASCII text with LF line ends: mrcal reads the text we read, copied to {vnl}")
     cands = []
     for name, lm in plan:
-        argv = calibration_argv(cs, os.path.join(outdir, "candidates", name), lm, f)
+        argv = calibration_argv(cs, os.path.join(outdir, "candidates", name), lm, f, vnl)
         c = Candidate(name, lm, command_line(argv), os.path.join(outdir, "candidates", name, "camera-0.cameramodel"))
         log("$ " + c.command)
         try:

@@ -53,9 +53,10 @@ import numpy as np
 from .. import dataset
 from ..atomic import atomic_path
 from ..focal import focal_estimates
-from ..vnl import mrcal_keeps, read_corners
+from ..vnl import CornersFileError, mrcal_keeps, open_corners, read_corners
 from .calibrate import (MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, VALID_REGION_PARAMETERS,
-                        CalibrationError, InputError, command_line, resolve_lensmodel, run_calibration, vnl_has_weights)
+                        CalibrationError, InputError, command_line, mrcal_corners, resolve_lensmodel, run_calibration,
+                        vnl_has_weights)
 
 
 def camera_of(path: str) -> int | None:
@@ -119,11 +120,13 @@ def load_rig_corners(vnl: str, seq: str) -> RigCornerSet:
     """Read a corners.vnl of the multi-camera dataset seq; InputError when it holds no board of some camera"""
     pattern, layout = dataset.read_pattern(seq)
     rig = dataset.read_rig(seq, pattern["frames"])
-    with open(vnl, encoding="ascii") as f:
-        try:
+    try:
+        with open_corners(vnl) as f:
             boards = read_corners(f, layout.nx, layout.ny)
-        except ValueError as e:
-            raise InputError(f"{vnl}: {e} (is {seq}/pattern.json the pattern of these corners?)") from None
+    except CornersFileError as e:
+        raise InputError(str(e)) from None
+    except ValueError as e:
+        raise InputError(f"{vnl}: {e} (pattern: {seq}/pattern.json)") from None
     files = {k: [] for k in rig.cameras}
     for fn, grid in boards.items():
         k = camera_of(fn)
@@ -267,7 +270,10 @@ def calibrate_rig(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: floa
     for fn in list(finals.values()) + [os.path.join(work, f"camera-{k}.cameramodel") for k in rs.cameras]:
         if os.path.exists(fn):
             os.remove(fn)
-    argv = rig_argv(rs.vnl, rs.layout, rs.imagersizes, focals, lensmodel, work,
+    vnl = mrcal_corners(rs.vnl, os.path.join(outdir, "candidates"))
+    if vnl != rs.vnl:
+        log(f"{rs.vnl} is not plain ASCII text with LF line ends: mrcal reads the text we read, copied to {vnl}")
+    argv = rig_argv(vnl, rs.layout, rs.imagersizes, focals, lensmodel, work,
                     rig_globs(rs.seq, rs.cameras, first), rs.weights)
     cmd = command_line(argv)
     log("$ " + cmd)
