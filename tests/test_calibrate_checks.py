@@ -7,6 +7,7 @@ of a simulated D435, no rendering) calibrated in this process.
 from __future__ import annotations
 
 import codecs
+import json
 import os
 
 import mrcal
@@ -98,3 +99,67 @@ def test_imagersize_that_is_not_the_images_is_named(clean, tmp_path):
     with pytest.raises(SourceError, match=r"the imager size given, 640x400, is not the size of the images .*\(1280x800"):
         load_corner_set(vnl, imagersize=(640, 400))
     assert load_corner_set(vnl, imagersize=(1280, 800)).imagersize == (1280, 800)
+
+
+def _copy_with(vnl: str, dest, rewrite) -> str:
+    """vnl's dataset (symlinked) with a corners file rewritten by rewrite(lines) -> lines"""
+    os.makedirs(dest)
+    src = os.path.dirname(vnl)
+    for f in os.listdir(src):
+        if f != os.path.basename(vnl):
+            os.symlink(os.path.join(src, f), os.path.join(dest, f))
+    out = os.path.join(dest, os.path.basename(vnl))
+    with open(out, "w") as f:
+        f.write("".join(rewrite(open(vnl).read().splitlines(keepends=True))))
+    return out
+
+
+def _truth_error(model_path, vnl):
+    from rotstar_mrcal.simulate import load_truth
+    from rotstar_mrcal.validate.truth import truth_error, truth_poses_of
+
+    truth = load_truth(os.path.dirname(vnl))
+    m = mrcal.cameramodel(model_path)
+    return truth_error(m, truth.model, truth_poses_of(m, truth.rt_cam_board)).median
+
+
+def test_board_with_shuffled_rows_is_dropped_and_named(clean, tmp_path, capsys):
+    """Was: the model written with exit 0, fit 44.5 px, 30.9 px from the true camera"""
+    vnl, c = clean
+    board = slice(1 + 3 * 126, 1 + 4 * 126)  # pose003's rows
+
+    def shuffle(lines):
+        rows = lines[board]
+        lines[board] = [rows[i] for i in np.random.default_rng(1).permutation(len(rows))]
+        return lines
+
+    bad = _copy_with(vnl, tmp_path / "d", shuffle)
+    rc = calibrate_cli.main([os.path.dirname(bad), "--corners", bad, "--outdir", str(tmp_path / "cal")])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert "dropping pose003/rotstar_00.png: its corners are not in grid order" in out.err
+    c2 = json.load(open(tmp_path / "cal" / "calibration.json"))
+    assert list(c2["dropped"]) == ["pose003"] and c2["candidates"][0]["stats"]["boards"] == 9
+    assert _truth_error(out.out.strip(), vnl) < 2 * _truth_error(c.model_path, vnl) + 0.05  # was 30.9 px
+    assert "--corners-cache " + str(tmp_path / "cal" / "candidates" / "corners.vnl") in c2["candidates"][0]["command"]
+
+
+def test_transposed_boards_are_named(clean, tmp_path, capsys):
+    """Every board written in rows of 9 for a 14 x 9 pattern: was 'the valid-intrinsics region is empty'"""
+    vnl, _ = clean
+    cs = load_corner_set(vnl)
+
+    def transpose(lines):
+        from rotstar_mrcal.vnl import write_corners
+        import io
+
+        s = io.StringIO()
+        write_corners(s, [(f, g.transpose(1, 0, 2).reshape(9, 14, 2)) for f, g in zip(cs.files, cs.corners)])
+        return s.getvalue().splitlines(keepends=True)
+
+    bad = _copy_with(vnl, tmp_path / "d", transpose)
+    rc = calibrate_cli.main([os.path.dirname(bad), "--corners", bad, "--outdir", str(tmp_path / "cal")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and bad in err[0], err
+    assert "the board is transposed" in err[0] and "rows of 9, not of 14" in err[0], err
+
