@@ -318,3 +318,14 @@ def test_three_cameras_of_different_sizes(tmp_path, monkeypatch, capsys):
         c = -mrcal.R_from_r(m.extrinsics_rt_fromref()[:3]).T @ m.extrinsics_rt_fromref()[3:]
         c_true = -mrcal.R_from_r(t.models[k].extrinsics_rt_fromref()[:3]).T @ t.models[k].extrinsics_rt_fromref()[3:]
         assert np.linalg.norm(c - c_true) < 1e-3
+
+
+def test_imagersize_that_is_not_the_cameras_is_named(tmp_path, capsys):
+    """A wrong --imagersize on a rig: named as such, before anything is solved"""
+    seq = tiny_rig(tmp_path)
+    vnl = tmp_path / "c.vnl"
+    vnl.write_text(f"# filename x y level\n{seq}/pose000/camera-0/rotstar_00.png - - -\n")
+    rc = calibrate_cli.main([seq, "--corners", str(vnl), "--outdir", str(tmp_path / "cal"), "--imagersize", "60", "40"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "the imager size given, 60x40, is not the size of" in err[0], err
+    assert "camera-1 images (48x30)" in err[0], err
