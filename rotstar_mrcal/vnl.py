@@ -18,6 +18,10 @@ SYNOPSIS
     (18, False)
     >>> write_corners(io.StringIO(), [("seq/c/rotstar_00.png", sparse)])  # written as no board
     [SparseBoard(file='seq/c/rotstar_00.png', corners=14, limit=18)]
+    >>> corners_text(b"\\xef\\xbb\\xbf# filename x y level\\r\\na.png 1 2 0.5\\r\\n", "c.vnl")   # BOM, CRLF
+    '# filename x y level\\na.png 1 2 0.5\\n'
+    >>> corners_text(b"# filename x y level\\na.png 1 2 0.5\\n", "c.vnl") is None   # plain: mrcal reads it as is
+    True
 
 The rules (mrcal 2.5, checked against mrcal.compute_chessboard_corners): a
 header line `# filename x y level` (or `weight`), then per image either
@@ -60,12 +64,61 @@ check), as it refuses any weighted file.
 
 from __future__ import annotations
 
+import codecs
 import dataclasses
+import io
 
 import numpy as np
 
 LEVEL = "0.5"
 """The fourth column of an unweighted corners.vnl (module doc: why not 0)"""
+
+
+class CornersFileError(ValueError):
+    """A corners file that cannot be read as text; the message names the file and the reason"""
+
+
+_BOMS = ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"), (codecs.BOM_UTF8, "utf-8-sig"),
+         (codecs.BOM_UTF16_LE, "utf-16"), (codecs.BOM_UTF16_BE, "utf-16"))
+
+
+def corners_text(data: bytes, path: str) -> str | None:
+    """A corners file's bytes as the text mrcal needs (ASCII, '\\n' line ends), or None when they are that already
+
+    Read as text in any common form: UTF-8 (with or without a byte-order
+    mark), UTF-16 or UTF-32 with a byte-order mark, and CRLF, CR or LF line
+    ends. mrcal's parser takes '\\r' as part of the last field (a level
+    `0.5\\r` is misread: issue 20), so a file in another form is handed to
+    mrcal as a normalised copy (mrcal_corners). CornersFileError (naming path)
+    for bytes that are not such text, or text mrcal cannot read (not ASCII,
+    NUL bytes).
+    """
+    enc = next((e for bom, e in _BOMS if data.startswith(bom)), "utf-8")
+    try:
+        text = data.decode(enc)
+    except UnicodeDecodeError as e:
+        raise CornersFileError(f"{path}: not a text file in UTF-8, or UTF-16/32 with a byte-order mark "
+                               f"(undecodable byte at offset {e.start})") from None
+    if "\0" in text:
+        raise CornersFileError(f"{path}: holds NUL characters (UTF-16 without a byte-order mark?); "
+                               "write it as ASCII text")
+    lines = text.splitlines()
+    bad = next((i for i, line in enumerate(lines) if not line.isascii()), None)
+    if bad is not None:
+        raise CornersFileError(f"{path}: line {bad + 1} is not ASCII (mrcal reads ASCII file names and numbers only)")
+    norm = "".join(line + "\n" for line in lines)
+    return None if norm.encode("ascii") == data else norm
+
+
+def open_corners(path: str) -> io.StringIO:
+    """A corners file as a text stream (corners_text: any common line end and encoding); CornersFileError"""
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise CornersFileError(f"{path}: cannot be read ({e.strerror or e})") from None
+    text = corners_text(data, path)
+    return io.StringIO(data.decode("ascii") if text is None else text)
 
 
 def mrcal_can_read(fn: str) -> bool:
@@ -165,7 +218,19 @@ def read_corners(stream, nx: int, ny: int) -> dict:
         if f[0] not in rows:
             rows[f[0]] = []
             order.append(f[0])
-        rows[f[0]].append([np.nan, np.nan] if f[1] == "-" else [float(f[1]), float(f[2])])
+        if len(f) < 3:
+            raise ValueError(f"{f[0]}: a row of {len(f)} field{'s' * (len(f) != 1)}, expected filename x y [level]")
+        if f[1] == "-":
+            rows[f[0]].append([np.nan, np.nan])
+            continue
+        try:
+            xy = [float(f[1]), float(f[2])]
+        except ValueError:
+            raise ValueError(f"{f[0]}: corner {len(rows[f[0]])}: coordinates {f[1]} {f[2]} are not numbers") from None
+        if not np.isfinite(xy).all():
+            raise ValueError(f"{f[0]}: corner {len(rows[f[0]])}: coordinates {f[1]} {f[2]} are not finite "
+                             "(a missing corner is written '- - -')")
+        rows[f[0]].append(xy)
     out = {}
     for fn in order:
         r = rows[fn]
@@ -174,5 +239,5 @@ def read_corners(stream, nx: int, ny: int) -> dict:
         elif len(r) == nx * ny:
             out[fn] = np.array(r).reshape(ny, nx, 2)
         else:
-            raise ValueError(f"{fn}: {len(r)} rows, expected {nx * ny} or 1")
+            raise ValueError(f"{fn}: {len(r)} rows, expected {nx * ny} (the pattern's {nx} x {ny} corners) or 1")
     return out

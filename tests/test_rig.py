@@ -8,6 +8,7 @@ The layout errors are checked on tiny hand-made datasets.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 
@@ -134,6 +135,49 @@ def test_calibrate_recovers_the_baseline(rig_seq, detected, tmp_path, capsys):
     e = board_residuals(m)
     assert np.isfinite(e).sum() > 500 and np.sqrt(np.nanmean(e**2)) < 0.05
 
+
+
+def test_cameras_swapped_in_one_pose_are_dropped_and_named(rig_seq, detected, tmp_path, capsys):
+    """The issue's rig with camera-0 and camera-1 swapped in one pose of 8 (as if the folders were swapped): was
+    written with exit 0 at a fit RMS of 160 px and fx -29; now that pose is found, named and left out"""
+    vnl, _ = detected
+    text = open(vnl).read()
+    pose = "pose003"
+    a, b = os.path.join(pose, "camera-0") + os.sep, os.path.join(pose, "camera-1") + os.sep
+    assert a in text and b in text
+    swapped = tmp_path / "swapped.vnl"
+    swapped.write_text(text.replace(a, "@").replace(b, a).replace("@", b))
+    out = str(tmp_path / "cal")
+    rc = calibrate_cli.main([rig_seq, "--corners", str(swapped), "--outdir", out])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert f"dropping {pose} (" in err and "the fit is implausible" in err, err
+    c = json.load(open(os.path.join(out, "calibration.json")))
+    assert sorted(c["dropped"]) == [f"{pose}/camera-0", f"{pose}/camera-1"] and c["ok"]
+    t = load_rig_truth(rig_seq)
+    for k in (0, 1):
+        m = mrcal.cameramodel(os.path.join(out, f"camera-{k}.cameramodel"))
+        assert np.allclose(m.intrinsics()[1][:4], t.models[k].intrinsics()[1][:4], atol=0.5)
+        assert np.linalg.norm(m.extrinsics_rt_fromref()[3:] - t.models[k].extrinsics_rt_fromref()[3:]) < 1e-3
+
+
+def test_implausible_rig_fit_is_never_written(rig_seq, detected, tmp_path, capsys):
+    """Four poses, one swapped: no pose can be left out (each camera needs 4 boards), so no culprit is found: exit 1
+    naming the implausible fit, no model files, also with --keep"""
+    vnl, _ = detected
+    keep = ("pose001", "pose003", "pose005", "pose006")
+    lines = [x for x in open(vnl).read().splitlines(keepends=True)
+             if x.startswith("#") or x.split()[0].split(os.sep)[-3] in keep]
+    assert len({x.split()[0] for x in lines if not x.startswith("#")}) == 8  # both cameras in each
+    text = "".join(lines)
+    a, b = os.path.join("pose003", "camera-0") + os.sep, os.path.join("pose003", "camera-1") + os.sep
+    swapped = tmp_path / "swapped.vnl"
+    swapped.write_text(text.replace(a, "@").replace(b, a).replace("@", b))
+    out = str(tmp_path / "cal")
+    rc = calibrate_cli.main([rig_seq, "--corners", str(swapped), "--outdir", out, "--keep"])
+    err = capsys.readouterr()
+    assert rc == 1 and err.out == "" and "FAILED: " in err.err and "fit RMS" in err.err, err.err
+    assert not [f for f in os.listdir(out) if f.endswith(".cameramodel")]
 
 # ---------------------------------------------------------------------------
 # the layout's errors, on tiny datasets
@@ -274,3 +318,14 @@ def test_three_cameras_of_different_sizes(tmp_path, monkeypatch, capsys):
         c = -mrcal.R_from_r(m.extrinsics_rt_fromref()[:3]).T @ m.extrinsics_rt_fromref()[3:]
         c_true = -mrcal.R_from_r(t.models[k].extrinsics_rt_fromref()[:3]).T @ t.models[k].extrinsics_rt_fromref()[3:]
         assert np.linalg.norm(c - c_true) < 1e-3
+
+
+def test_imagersize_that_is_not_the_cameras_is_named(tmp_path, capsys):
+    """A wrong --imagersize on a rig: named as such, before anything is solved"""
+    seq = tiny_rig(tmp_path)
+    vnl = tmp_path / "c.vnl"
+    vnl.write_text(f"# filename x y level\n{seq}/pose000/camera-0/rotstar_00.png - - -\n")
+    rc = calibrate_cli.main([seq, "--corners", str(vnl), "--outdir", str(tmp_path / "cal"), "--imagersize", "60", "40"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "the imager size given, 60x40, is not the size of" in err[0], err
+    assert "camera-1 images (48x30)" in err[0], err

@@ -352,6 +352,10 @@ def calibrate_capture(seq: str, name: str, files: list[str], boards: list, outdi
         sparse = write_corners(f, [(files[i], boards[i]) for i in idx])
     cs = load_corner_set(vnl)
     c = calibrate(cs, outdir, spec=lensmodel, keep=True, in_process=True, log=log)
+    if not c.model_path:  # an implausible fit is not written even with keep
+        from ..validate.calibrate import CalibrationError
+
+        raise CalibrationError(f"{vnl}: no model: " + "; ".join(c.failures))
     model = mrcal.cameramodel(c.model_path)
     W, H = cs.imagersize
     obs = model.optimization_inputs()["observations_board"]

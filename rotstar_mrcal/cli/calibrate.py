@@ -175,6 +175,11 @@ def _main_rig(a) -> int:
     try:
         rs = rig.load_rig_corners(vnl, a.seq)
         if a.imagersize:
+            other = {k: v for k, v in rs.imagersizes.items() if v is not None and tuple(v) != tuple(a.imagersize)}
+            if other:
+                k, (W, H) = next(iter(other.items()))
+                raise cal.InputError(f"the imager size given, {a.imagersize[0]}x{a.imagersize[1]}, is not the size "
+                                     f"of {a.seq}'s camera-{k} images ({W}x{H}): give --imagersize {W} {H} or none")
             rs.imagersizes = {k: tuple(a.imagersize) for k in rs.cameras}
         if a.dry_run:
             rig.check_rig(rs)

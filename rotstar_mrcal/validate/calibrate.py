@@ -128,6 +128,25 @@ MOSTLY_OUTLIERS = 0.5
 VALID_REGION_PARAMETERS = (5, 0.05, 2, 3, 0)
 """mrcal-calibrate-cameras --valid-intrinsics-region-parameters for sub-0.05 px corners (module doc)"""
 
+GRID_BEND_MAX = 0.5
+"""A second difference of neighbouring corners longer than this fraction of their spacing is a break in the grid"""
+
+GRID_DISORDER_MAX = 0.05
+"""A board with more than this fraction of breaks is not in the pattern's grid order (misordered_boards)"""
+
+MAX_FIT_RMS_PX = 1.0
+"""A fit RMS above this (2-D, px) is no calibration: corners labelled wrongly or from another camera (fit_failures)"""
+
+BOARD_FAR_FACTOR = 5.0
+BOARD_FAR_MIN_PX = 0.05
+"""A board whose fit RMS is above BOARD_FAR_FACTOR x the median board's and above BOARD_FAR_MIN_PX is far off the rest"""
+
+FOCAL_FIT_FACTOR = 2.0
+"""The solved fx, fy must be within this factor of the focal seed (and positive)"""
+
+MAX_DROP_SEARCH = 40
+"""An implausible fit is searched for the one pose that explains it (a solve without each) up to this many poses"""
+
 FOCAL_MIN_BOARDS = 3
 FOCAL_MAX_SPREAD = 0.15
 """The focal seed needs this many boards whose estimates agree to this (median absolute deviation / median)"""
@@ -201,7 +220,9 @@ def image_glob(filenames) -> str:
 
 def vnl_has_weights(path: str) -> bool:
     """Does a corners.vnl say (in its `# filename x y ...` header) that column 4 is a weight?"""
-    with open(path, encoding="ascii", errors="replace") as f:
+    from ..vnl import open_corners
+
+    with open_corners(path) as f:
         for line in f:
             s = line.strip()
             if not s:
@@ -212,6 +233,39 @@ def vnl_has_weights(path: str) -> bool:
             if fields[:3] == ["filename", "x", "y"]:
                 return len(fields) > 3 and fields[3] == "weight"
     return False
+
+
+def mrcal_corners(vnl: str, folder: str, drop=()) -> str:
+    """The corners file to hand mrcal: vnl itself when mrcal reads it as we do, else a copy in folder
+
+    The copy (folder/corners.vnl, written atomically) is the text we read
+    (vnl.corners_text: LF line ends, ASCII, no byte-order mark) without the
+    rows of the image names in drop. CornersFileError for a file that is not
+    such text.
+
+    SYNOPSIS
+
+        >>> import tempfile
+        >>> d = tempfile.mkdtemp(); fn = os.path.join(d, "c.vnl")
+        >>> _ = open(fn, "wb").write(b"# filename x y level\\r\\na/r.png 1 2 0.5\\r\\nb/r.png 3 4 0.5\\r\\n")
+        >>> out = mrcal_corners(fn, os.path.join(d, "m"), drop={"b/r.png"})
+        >>> out == os.path.join(d, "m", "corners.vnl"), open(out, "rb").read()
+        (True, b'# filename x y level\\na/r.png 1 2 0.5\\n')
+    """
+    from ..vnl import corners_text
+
+    with open(vnl, "rb") as f:
+        data = f.read()
+    text = corners_text(data, vnl)
+    if text is None and not drop:
+        return vnl
+    text = data.decode("ascii") if text is None else text
+    keep = [line for line in text.splitlines(keepends=True) if not (line.split()[:1] and line.split()[0] in drop)]
+    out = os.path.join(folder, "corners.vnl")
+    os.makedirs(folder, exist_ok=True)
+    with atomic_path(out) as tmp, open(tmp, "w", encoding="ascii", newline="\n") as f:
+        f.write("".join(keep))
+    return out
 
 
 def calibrate_argv(vnl: str, layout, imagersize, focal: float, lensmodel: str, outdir: str,
@@ -383,6 +437,48 @@ def png_size(path: str) -> tuple[int, int] | None:
     return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
 
 
+def grid_disorder(grid) -> float:
+    """The fraction of breaks in a board's grid (GRID_BEND_MAX): ~0 for corners in grid order, ~1 for shuffled ones
+
+    Under perspective and lens distortion neighbouring steps of the grid
+    change little; corners out of order (rows shuffled, a board read with
+    rows and columns swapped) break it. Missing corners (NaN) are skipped.
+
+    SYNOPSIS
+
+        >>> j, i = np.mgrid[0:9, 0:14]
+        >>> grid = np.stack([40.0 * i + 0.3 * i * j, 40.0 * j], axis=-1)      # a sheared 14 x 9 grid
+        >>> grid_disorder(grid), grid_disorder(grid.reshape(-1, 2).reshape(14, 9, 2)) > GRID_DISORDER_MAX
+        (0.0, True)
+    """
+    q = np.asarray(grid, float)
+    bends = []
+    for g in (q, q.transpose(1, 0, 2)):
+        step = np.diff(g, axis=1)
+        d2 = np.linalg.norm(np.diff(step, axis=1), axis=-1)
+        scale = 0.5 * (np.linalg.norm(step[:, 1:], axis=-1) + np.linalg.norm(step[:, :-1], axis=-1))
+        ok = np.isfinite(d2) & np.isfinite(scale)
+        bends.append(d2[ok] > GRID_BEND_MAX * scale[ok])
+    b = np.concatenate(bends)
+    return float(b.mean()) if len(b) else 0.0
+
+
+def misordered_boards(corners, files, layout) -> dict[str, str]:
+    """{file: why} for the boards whose corners are not in the pattern's grid order (grid_disorder)"""
+    out = {}
+    nx, ny = layout.nx, layout.ny
+    for f, grid in zip(files, corners):
+        d = grid_disorder(grid)
+        if d <= GRID_DISORDER_MAX:
+            continue
+        if grid_disorder(np.asarray(grid).reshape(-1, 2).reshape(nx, ny, 2)) <= GRID_DISORDER_MAX:
+            out[f] = (f"its corners are in rows of {ny}, not of {nx}: the board is transposed (pattern.json, "
+                      f"--object-width-n, says {nx} x {ny})")
+        else:
+            out[f] = f"its corners are not in grid order ({100 * d:.0f}% of neighbouring steps break the grid)"
+    return out
+
+
 def focal_seed(cs, check: bool = True) -> float:
     """The focal seed (pixels) of a corner set: the median of its boards' estimates
 
@@ -459,10 +555,10 @@ def splined_supported(cs, knots_x: int = DEFAULT_KNOTS_X) -> tuple[bool, str]:
     return True, f"{n} boards covering {100 * c:.0f}% of the imager"
 
 
-def calibration_argv(cs, outdir: str, lensmodel: str, focal: float | None = None) -> list[str]:
-    """The mrcal-calibrate-cameras command for a corner set (sources.CornerSet)"""
+def calibration_argv(cs, outdir: str, lensmodel: str, focal: float | None = None, vnl: str | None = None) -> list[str]:
+    """The mrcal-calibrate-cameras command for a corner set (sources.CornerSet); vnl: mrcal's copy (mrcal_corners)"""
     focal = focal_seed(cs, check=False) if focal is None else focal
-    return calibrate_argv(cs.vnl, cs.layout, cs.imagersize, focal, lensmodel, outdir,
+    return calibrate_argv(vnl or cs.vnl, cs.layout, cs.imagersize, focal, lensmodel, outdir,
                           image_glob(cs.files), weights=cs.weights)
 
 
@@ -540,6 +636,8 @@ def model_stats(model: mrcal.cameramodel, cs=None) -> dict:
         "boards_mostly_outliers": mostly,  # pose -> [corners rejected, corners given]
         "rms_px": float(np.sqrt(np.mean(e[ok] ** 2))) if ok.any() else float("nan"),
         "worst_px": float(np.max(e[ok])) if ok.any() else float("nan"),
+        "board_rms_px": {(paths[b] if len(paths) == obs.shape[0] else str(b)): float(np.sqrt(np.mean(e[b][ok[b]] ** 2)))
+                         for b in range(obs.shape[0]) if ok[b].any()},
         "sigma_px": float(np.std(mrcal.measurements_board(oi))),
         "focal_px": [float(v) for v in intr[:2]],
         "centre_px": [float(v) for v in intr[2:4]],
@@ -658,6 +756,8 @@ class Calibration:
     comparison: dict | None  # cross_validate(lean, splined).summary()
     focal_seed: float
     corners: str  # the corners.vnl
+    dropped: dict = dataclasses.field(default_factory=dict)  # pose -> why its board was left out
+
 
     FORMAT = "rotstar-calibrate/1"
 
@@ -677,10 +777,11 @@ class Calibration:
         return {"format": self.FORMAT, "ok": self.ok, "model": self.model_path, "chosen": self.chosen,
                 "reason": self.reason, "failures": self.failures, "kept": self.kept,
                 "focal_seed_px": self.focal_seed, "corners": self.corners, "comparison": self.comparison,
+                "dropped": self.dropped,
                 "candidates": [c.to_json() for c in self.candidates]}
 
     def summary_lines(self) -> list[str]:
-        out = []
+        out = [f"dropped {k}: {v}" for k, v in self.dropped.items()]
         for c in self.candidates:
             mark = "written" if c.name == self.chosen and self.model_path else (
                 "chosen" if c.name == self.chosen else "not written")
@@ -736,10 +837,12 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
     on the model that would be written. Every mrcal command goes to log (a
     function of one line) before it runs. The candidates' models stay in
     outdir/candidates/<name>/; outdir/camera-0.cameramodel is removed first
-    and written (atomically) only for a result.
+    and written (atomically) only for a result. Boards out of grid order
+    (misordered_boards) are dropped before mrcal runs, a board that explains
+    an implausible fit (fit_failures) after it; each is named in log and in
+    Calibration.dropped. A fit that stays implausible is not written, even
+    with keep.
     """
-    from .crossval import cross_validate
-
     log = log or (lambda s: None)
     final = os.path.join(outdir, "camera-0.cameramodel")
     for stale in [final] + [os.path.join(outdir, "candidates", n, "camera-0.cameramodel")
@@ -747,6 +850,14 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
                                                       "model-seeded")]:
         if os.path.exists(stale):
             os.remove(stale)
+    dropped = {}
+    bad = misordered_boards(cs.corners, cs.files, cs.layout)
+    if bad and 2 * len(bad) > len(cs.files):
+        f0, why = next(iter(bad.items()))
+        raise InputError(f"{cs.vnl}: {len(bad)} of its {len(cs.files)} boards are not the pattern's grid, e.g. "
+                         f"{f0}: {why}")
+    if bad:
+        cs = _drop(cs, bad, dropped, log)
     check_inputs(cs)  # the boards and the image sizes first: they decide whether anything can be done
     f = focal_seed(cs, check=not force) if focal is None else float(focal)
     lensmodel = resolve_lensmodel(spec, cs.imagersize, f, knots_x)
@@ -760,9 +871,46 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
             log(f"splined model supported ({why}): fitting it after the lean one")
         else:
             log(f"lean model only: {why}")
+    vnl = mrcal_corners(cs.vnl, os.path.join(outdir, "candidates"), drop=set(dropped))
+    if vnl != cs.vnl and not dropped:
+        log(f"{cs.vnl} is not plain ASCII text with LF line ends: mrcal reads the text we read, copied to {vnl}")
+    while True:
+        chosen, reason, failures, cands, comparison = _fit(cs, outdir, plan, f, vnl, why, in_process, log)
+        f_boards = focal_seed(cs, check=False)  # what the boards say, whatever --focal was
+        implausible = fit_failures(chosen.stats, f_boards)
+        if not implausible:
+            break
+        culprits = _culprits(cs, chosen, f_boards, outdir, dropped, log)
+        if not culprits or len(cs.files) - len(culprits) < MIN_BOARDS:
+            failures = implausible + failures
+            break
+        cs = _drop(cs, culprits, dropped, log)
+        vnl = mrcal_corners(cs.vnl, os.path.join(outdir, "candidates"), drop=set(dropped))
+    written = None
+    if not failures or (keep and not implausible):
+        os.makedirs(outdir, exist_ok=True)
+        _atomic_copy(chosen.path, final)
+        written = final
+    return Calibration(written, chosen.name, reason, failures, bool(failures) and bool(written), cands, comparison,
+                       f, cs.vnl, {_pose_of_path(k): v for k, v in dropped.items()})
+
+
+def _drop(cs, bad: dict, dropped: dict, log):
+    """cs without the boards (files) in bad; each named in log and added to dropped (file -> why)"""
+    for fn, why in bad.items():
+        log(f"dropping {fn}: {why}")
+        dropped[fn] = why
+    keep = [i for i, fn in enumerate(cs.files) if fn not in bad]
+    return dataclasses.replace(cs, files=[cs.files[i] for i in keep], corners=cs.corners[keep])
+
+
+def _fit(cs, outdir, plan, f, vnl, why, in_process, log):
+    """The candidates of plan fitted and the one to write chosen: (chosen, reason, failures, cands, comparison)"""
+    from .crossval import cross_validate
+
     cands = []
     for name, lm in plan:
-        argv = calibration_argv(cs, os.path.join(outdir, "candidates", name), lm, f)
+        argv = calibration_argv(cs, os.path.join(outdir, "candidates", name), lm, f, vnl)
         c = Candidate(name, lm, command_line(argv), os.path.join(outdir, "candidates", name, "camera-0.cameramodel"))
         log("$ " + c.command)
         try:
@@ -812,10 +960,81 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
             reason = (f"{lean.lensmodel}: the splined model fits the corners worse (RMS "
                       f"{spl.stats['rms_px']:.5f} vs {lean.stats['rms_px']:.5f} px); its "
                       f"{comparison['diff_median_px']:.4f} px difference is freedom the boards do not constrain")
-    written = None
-    if not failures or keep:
-        os.makedirs(outdir, exist_ok=True)
-        _atomic_copy(chosen.path, final)
-        written = final
-    return Calibration(written, chosen.name, reason, failures, bool(failures) and keep, cands, comparison, f,
-                       cs.vnl)
+    return chosen, reason, failures, cands, comparison
+
+
+def far_boards(board_rms: dict) -> dict:
+    """{board: its fit RMS} of the boards far off the rest (BOARD_FAR_FACTOR x the median board, BOARD_FAR_MIN_PX)
+
+    >>> far_boards({"pose000": 0.011, "pose001": 0.009, "pose002": 0.01, "pose003": 3.2})
+    {'pose003': 3.2}
+    """
+    if len(board_rms) < 3:
+        return {}
+    med = float(np.median(list(board_rms.values())))
+    return {k: v for k, v in board_rms.items() if v > BOARD_FAR_FACTOR * med and v > BOARD_FAR_MIN_PX}
+
+
+def fit_failures(s: dict, focal: float) -> list[str]:
+    """Why a fit (model_stats) is no calibration: focal lengths far from the boards' estimate (focal), an RMS
+    corners cannot have, boards far off the rest (far_boards); one reason each
+
+    >>> fit_failures({"rms_px": 160.0, "focal_px": [-29.0, 640.0], "board_rms_px": {}}, 640)[0]
+    "the solved focal length fx -29 px is not within 2x of the boards' estimate 640 px"
+    """
+    out = []
+    for name, v in zip(("fx", "fy"), s["focal_px"]):
+        if not focal / FOCAL_FIT_FACTOR <= v <= focal * FOCAL_FIT_FACTOR:
+            out.append(f"the solved focal length {name} {v:.0f} px is not within {FOCAL_FIT_FACTOR:g}x of the boards' "
+                       f"estimate {focal:.0f} px")
+    med = float(np.median(list(s["board_rms_px"].values()))) if s.get("board_rms_px") else float("nan")
+    if not s["rms_px"] <= MAX_FIT_RMS_PX:
+        out.append(f"the fit RMS {s['rms_px']:.3g} px is more than corners can be off ({MAX_FIT_RMS_PX:g} px; "
+                   f"the median board's {med:.3g} px): corners labelled wrongly, or not of this camera")
+    far = far_boards(s.get("board_rms_px") or {})
+    if far:
+        out.append("boards far off the rest: " + ", ".join(f"{k} (fit RMS {v:.3g} px)" for k, v in far.items())
+                   + f", the median board's {med:.3g} px")
+    return out
+
+
+def _culprits(cs, chosen, f, outdir, dropped, log) -> dict:
+    """{file: why} of the boards that explain an implausible fit, or {} when none does
+
+    Boards far off the rest (far_boards) when the fit is otherwise
+    plausible; else the first board whose leaving out gives a plausible lean
+    fit, searched by solving without each, the worst-fitting first (up to
+    MAX_DROP_SEARCH boards).
+    """
+    s = chosen.stats
+    byname = dict(zip(cs.names, cs.files))
+    far = far_boards(s["board_rms_px"])
+    if far and len(fit_failures(s, f)) == 1:
+        med = float(np.median(list(s["board_rms_px"].values())))
+        return {byname[k]: f"its fit RMS {v:.3g} px is {v / med:.0f}x the median board's ({med:.3g} px)"
+                for k, v in far.items() if k in byname}
+    if len(cs.files) > MAX_DROP_SEARCH:
+        return {}
+    log(f"the fit is implausible ({'; '.join(fit_failures(s, f))}): solving without each board in turn")
+    best = None
+    rms = s["board_rms_px"]
+    for fn in sorted(cs.files, key=lambda fn: -rms.get(_pose_of_path(fn), 0.0)):  # the worst boards first
+        folder = os.path.join(outdir, "candidates", "without")
+        sub = dataclasses.replace(cs, files=[x for x in cs.files if x != fn],
+                                  corners=cs.corners[[x != fn for x in cs.files]])
+        argv = calibration_argv(sub, folder, LEAN_LENSMODEL, f,
+                                mrcal_corners(cs.vnl, folder, drop={fn} | set(dropped)))
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(os.path.join(folder, "camera-0.cameramodel"))
+        try:
+            st = model_stats(run_calibration(argv, in_process=True), sub)
+        except CalibrationError:
+            continue
+        if not fit_failures(st, f):
+            best = (fn, st["rms_px"])
+            break
+    if best is None:
+        return {}
+    why = fit_failures(s, f)
+    return {best[0]: (f"the fit without it is plausible (RMS {best[1]:.3g} px), with it not: {why[0]}"
+                      + (f" (and {len(why) - 1} more)" if len(why) > 1 else ""))}

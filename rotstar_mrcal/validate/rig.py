@@ -53,9 +53,10 @@ import numpy as np
 from .. import dataset
 from ..atomic import atomic_path
 from ..focal import focal_estimates
-from ..vnl import mrcal_keeps, read_corners
-from .calibrate import (MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, VALID_REGION_PARAMETERS,
-                        CalibrationError, InputError, command_line, resolve_lensmodel, run_calibration, vnl_has_weights)
+from ..vnl import CornersFileError, mrcal_keeps, open_corners, read_corners
+from .calibrate import (MAX_DROP_SEARCH, MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, VALID_REGION_PARAMETERS,
+                        CalibrationError, InputError, command_line, fit_failures, misordered_boards, mrcal_corners,
+                        resolve_lensmodel, run_calibration, vnl_has_weights)
 
 
 def camera_of(path: str) -> int | None:
@@ -119,11 +120,13 @@ def load_rig_corners(vnl: str, seq: str) -> RigCornerSet:
     """Read a corners.vnl of the multi-camera dataset seq; InputError when it holds no board of some camera"""
     pattern, layout = dataset.read_pattern(seq)
     rig = dataset.read_rig(seq, pattern["frames"])
-    with open(vnl, encoding="ascii") as f:
-        try:
+    try:
+        with open_corners(vnl) as f:
             boards = read_corners(f, layout.nx, layout.ny)
-        except ValueError as e:
-            raise InputError(f"{vnl}: {e} (is {seq}/pattern.json the pattern of these corners?)") from None
+    except CornersFileError as e:
+        raise InputError(str(e)) from None
+    except ValueError as e:
+        raise InputError(f"{vnl}: {e} (pattern: {seq}/pattern.json)") from None
     files = {k: [] for k in rig.cameras}
     for fn, grid in boards.items():
         k = camera_of(fn)
@@ -197,6 +200,7 @@ def camera_stats(oi: dict, rs: RigCornerSet) -> dict[int, dict]:
                                        for j in np.flatnonzero(lost > MOSTLY_OUTLIERS * had)},
             "rms_px": float(np.sqrt(np.mean(ek[ok] ** 2))) if ok.any() else float("nan"),
             "worst_px": float(np.max(ek[ok])) if ok.any() else float("nan"),
+            "board_rms_px": {name[j]: float(np.sqrt(np.mean(ek[j][ok[j]] ** 2))) for j in range(len(b)) if ok[j].any()},
         }
     return out
 
@@ -212,6 +216,7 @@ class RigCalibration:
     failures: list[str]
     kept: bool
     corners: str
+    dropped: dict = dataclasses.field(default_factory=dict)  # pose -> why it was left out
 
     FORMAT = "rotstar-calibrate-rig/1"
 
@@ -222,10 +227,11 @@ class RigCalibration:
     def to_json(self) -> dict:
         return {"format": self.FORMAT, "ok": self.ok, "models": {f"camera-{k}": v for k, v in self.models.items()},
                 "lensmodel": self.lensmodel, "command": self.command, "failures": self.failures, "kept": self.kept,
-                "corners": self.corners, "cameras": {f"camera-{k}": v for k, v in self.stats.items()}}
+                "corners": self.corners, "cameras": {f"camera-{k}": v for k, v in self.stats.items()},
+                "dropped": self.dropped}
 
     def summary_lines(self) -> list[str]:
-        out = []
+        out = [f"dropped {k}: {v}" for k, v in self.dropped.items()]
         for k, s in self.stats.items():
             rel = s["relative"]
             where = ("the reference (origin)" if k == 0 else
@@ -250,24 +256,100 @@ def rig_failures(stats: dict[int, dict]) -> list[str]:
     return out
 
 
+def pose_of(path: str) -> str:
+    """The pose folder of a rig file name
+
+    >>> pose_of("seq/pose003/camera-1/rotstar_00.png")
+    'pose003'
+    """
+    return os.path.basename(os.path.dirname(os.path.dirname(os.path.normpath(str(path)))))
+
+
+def without(rs: RigCornerSet, files) -> RigCornerSet:
+    """rs without the boards of these file names"""
+    files = set(files)
+    keep = {k: [i for i, f in enumerate(fs) if f not in files] for k, fs in rs.files.items()}
+    return dataclasses.replace(rs, files={k: [rs.files[k][i] for i in keep[k]] for k in rs.files},
+                               corners={k: rs.corners[k][keep[k]] for k in rs.corners})
+
+
 def calibrate_rig(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: float | None = None, keep: bool = False,
                   in_process: bool = False, log=None) -> RigCalibration:
     """Calibrate every camera of a rig at once; write outdir/camera-K.cameramodel if the checks pass (or keep)
 
     Raises InputError before mrcal runs (check_rig), CalibrationError when
     mrcal fails. The solve's own models stay in outdir/candidates/rig/.
+    Boards out of grid order are left out before mrcal runs; when the fit is
+    implausible (calibrate.fit_failures, per camera) the pose that explains
+    it (boards far off the rest, or the one pose without which the fit is
+    plausible) is left out and the rig solved again; each is named in log
+    and RigCalibration.dropped. A fit that stays implausible is not written,
+    even with keep.
     """
     log = log or (lambda s: None)
     check_rig(rs)
+    bad = {f: why for k in rs.cameras for f, why in misordered_boards(rs.corners[k], rs.files[k], rs.layout).items()}
+    nboards = sum(len(fs) for fs in rs.files.values())
+    if bad and 2 * len(bad) > nboards:
+        f0, why = next(iter(bad.items()))
+        raise InputError(f"{rs.vnl}: {len(bad)} of its {nboards} boards are not the pattern's grid, e.g. {f0}: {why}")
+    dropped = {}
+    for f, why in bad.items():
+        log(f"dropping {f}: {why}")
+        dropped[f] = why
+    rs = without(rs, bad)
+    check_rig(rs)
     focals = {k: (float(focal) if focal else rs.focal(k)) for k in rs.cameras}
     lensmodel = resolve_lensmodel(spec, rs.imagersizes[0], focals[0])
-    first = os.path.basename(rs.files[0][0])
-    work = os.path.join(outdir, "candidates", "rig")
     finals = {k: os.path.join(outdir, f"camera-{k}.cameramodel") for k in rs.cameras}
-    for fn in list(finals.values()) + [os.path.join(work, f"camera-{k}.cameramodel") for k in rs.cameras]:
+    for fn in finals.values():
         if os.path.exists(fn):
             os.remove(fn)
-    argv = rig_argv(rs.vnl, rs.layout, rs.imagersizes, focals, lensmodel, work,
+    work = os.path.join(outdir, "candidates", "rig")
+    while True:
+        vnl = mrcal_corners(rs.vnl, os.path.join(outdir, "candidates"), drop=set(dropped))
+        if vnl != rs.vnl and not dropped:
+            log(f"{rs.vnl} is not plain ASCII text with LF line ends: mrcal reads the text we read, copied to {vnl}")
+        cmd, stats = _solve_rig(rs, vnl, work, focals, lensmodel, in_process, log)
+        estimates = {k: rs.focal(k) for k in rs.cameras}  # what the boards say, whatever --focal was
+        implausible = _implausible(stats, estimates)
+        if not implausible:
+            break
+        culprit = _rig_culprit(rs, stats, focals, estimates, lensmodel, outdir, dropped, implausible, log)
+        if not culprit:
+            break
+        pose, why = culprit
+        files = [f for fs in rs.files.values() for f in fs if pose_of(f) == pose]
+        log(f"dropping {pose} ({', '.join(files)}): {why}")
+        dropped.update({f: why for f in files})
+        rs = without(rs, files)
+    failures = implausible + rig_failures(stats)
+    written = {}
+    if not failures or (keep and not implausible):
+        for k in rs.cameras:
+            with atomic_path(finals[k]) as tmp:
+                shutil.copyfile(os.path.join(work, f"camera-{k}.cameramodel"), tmp)
+            written[k] = finals[k]
+    return RigCalibration(written, lensmodel, cmd, stats, failures, bool(failures) and bool(written), rs.vnl,
+                          {_dropped_name(f): v for f, v in dropped.items()})
+
+
+def _dropped_name(f: str) -> str:
+    """pose003/camera-1 for seq/pose003/camera-1/rotstar_00.png"""
+    return pose_of(f) + "/" + os.path.basename(os.path.dirname(os.path.normpath(f)))
+
+
+def _implausible(stats: dict, focals: dict) -> list[str]:
+    return [f"camera-{k}: {r}" for k in stats for r in fit_failures(stats[k], focals[k])]
+
+
+def _solve_rig(rs, vnl, work, focals, lensmodel, in_process, log) -> tuple[str, dict]:
+    """One mrcal solve of the rig into work: (its command, camera_stats with each camera's intrinsics and pose)"""
+    for fn in [os.path.join(work, f"camera-{k}.cameramodel") for k in rs.cameras]:
+        if os.path.exists(fn):
+            os.remove(fn)
+    first = os.path.basename(rs.files[0][0])
+    argv = rig_argv(vnl, rs.layout, rs.imagersizes, focals, lensmodel, work,
                     rig_globs(rs.seq, rs.cameras, first), rs.weights)
     cmd = command_line(argv)
     log("$ " + cmd)
@@ -283,11 +365,89 @@ def calibrate_rig(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: floa
         lens, intr = m.intrinsics()
         stats[k].update(lensmodel=lens, focal_px=[float(v) for v in intr[:2]], centre_px=[float(v) for v in intr[2:4]],
                         relative=relative_pose(m))
-    failures = rig_failures(stats)
-    written = {}
-    if not failures or keep:
-        for k in rs.cameras:
-            with atomic_path(finals[k]) as tmp:
-                shutil.copyfile(os.path.join(work, f"camera-{k}.cameramodel"), tmp)
-            written[k] = finals[k]
-    return RigCalibration(written, lensmodel, cmd, stats, failures, bool(failures) and keep, rs.vnl)
+    return cmd, stats
+
+
+def camera_offsets(rs: RigCornerSet, focals: dict) -> dict[str, float]:
+    """{pose: how far (m) its cameras' relative position is from the median pose's}, from each board's own pose
+
+    Each board's pose in its camera (cv2.solvePnP with a pinhole of the focal
+    seed, no distortion: rough, but alike for every pose) gives where camera
+    K is relative to camera 0 at that instant; a pose whose camera folders
+    are swapped puts camera K on the other side. Poses seen by camera 0 only
+    give 0. The order in which calibrate_rig tries leaving poses out.
+    """
+    import cv2
+
+    obj = rs.layout.board_points().reshape(-1, 3).astype(np.float64)
+    where: dict[str, list] = {}
+    for k in rs.cameras:
+        W, H = rs.imagersizes[k]
+        K = np.array([[focals[k], 0, (W - 1) / 2], [0, focals[k], (H - 1) / 2], [0, 0, 1]], float)
+        for f, grid in zip(rs.files[k], rs.corners[k]):
+            q = grid.reshape(-1, 2)
+            ok = np.isfinite(q).all(axis=1)
+            if ok.sum() < 6:
+                continue
+            good, r, t = cv2.solvePnP(obj[ok], q[ok].astype(np.float64), K, None)
+            if good:
+                R = cv2.Rodrigues(r)[0]
+                where.setdefault(pose_of(f), {})[k] = (R, t.ravel())
+    rel = {}
+    for pose, cams in where.items():
+        if 0 in cams:
+            R0, t0 = cams[0]
+            # camera k's centre in camera 0's frame: board -> cam0 of (board coordinates of camera k's centre)
+            rel[pose] = {k: R0 @ (-R.T @ t) + t0 for k, (R, t) in cams.items() if k != 0}
+    out = {}
+    for pose in where:
+        d = 0.0
+        for k, c in rel.get(pose, {}).items():
+            med = np.median([v[k] for v in rel.values() if k in v], axis=0)
+            d = max(d, float(np.linalg.norm(c - med)))
+        out[pose] = d
+    return out
+
+
+def _rig_culprit(rs, stats, focals, estimates, lensmodel, outdir, dropped, implausible, log) -> tuple[str, str] | None:
+    """(pose, why) that explains an implausible rig fit, or None (see calibrate_rig)
+
+    Boards far off the rest all of one pose, when nothing else is wrong;
+    else the pose whose leaving out gives a plausible fit (the lowest
+    worst-camera RMS), searched by solving without each (up to
+    calibrate.MAX_DROP_SEARCH poses; every camera keeps MIN_BOARDS boards),
+    the poses whose cameras sit farthest from where they sit in the other
+    poses (camera_offsets) first; the first that gives a plausible fit.
+    """
+    far = [k for k in stats for r in fit_failures(stats[k], estimates[k]) if r.startswith("boards far off")]
+    if far and len(far) == len(implausible):
+        from .calibrate import far_boards
+
+        names = {n for k in stats for n in far_boards(stats[k]["board_rms_px"])}
+        poses = {n.split(":", 1)[1] for n in names}
+        if len(poses) == 1:
+            return poses.pop(), "its boards' fit is far off the rest: " + "; ".join(implausible)
+    offsets = camera_offsets(rs, focals)
+    poses = sorted({pose_of(f) for fs in rs.files.values() for f in fs}, key=lambda p: -offsets.get(p, 0.0))
+    if len(poses) > MAX_DROP_SEARCH:
+        return None
+    log(f"the fit is implausible ({'; '.join(implausible)}): solving without each pose in turn")
+    folder = os.path.join(outdir, "candidates", "without")
+    best = None
+    for pose in poses:
+        files = [f for fs in rs.files.values() for f in fs if pose_of(f) == pose]
+        sub = without(rs, files)
+        if any(len(sub.files[k]) < MIN_BOARDS for k in sub.cameras):
+            continue
+        vnl = mrcal_corners(rs.vnl, folder, drop=set(dropped) | set(files))
+        try:
+            _, st = _solve_rig(sub, vnl, os.path.join(folder, "rig"), focals, lensmodel, True, lambda s: None)
+        except CalibrationError:
+            continue
+        if not _implausible(st, estimates):
+            best = (pose, max(st[k]["rms_px"] for k in st))
+            break
+    if best is None:
+        return None
+    return best[0], (f"the fit without it is plausible (worst camera RMS {best[1]:.3g} px), with it not: "
+                     + implausible[0] + (f" (and {len(implausible) - 1} more)" if len(implausible) > 1 else ""))

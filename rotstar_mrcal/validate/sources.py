@@ -34,7 +34,7 @@ import numpy as np
 
 from .. import dataset
 from ..pattern.layout import Layout
-from ..vnl import mrcal_keeps, read_corners
+from ..vnl import CornersFileError, mrcal_keeps, open_corners, read_corners
 from .calibrate import vnl_has_weights
 from .compare import TestSet, TrueCamera
 
@@ -77,7 +77,7 @@ def resolve_image(name: str, vnl: str) -> str:
 def read_vnl_names(vnl: str) -> list[str]:
     """Image names of a corners.vnl in order of first appearance"""
     out, seen = [], set()
-    with open(vnl, encoding="ascii") as f:
+    with open_corners(vnl) as f:
         for line in f:
             s = line.split()
             if s and not s[0].startswith("#") and s[0] not in seen:
@@ -114,7 +114,10 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
     """Read a corners.vnl and find what belongs to it; see the module doc"""
     if not os.path.exists(vnl):
         raise SourceError(f"{vnl}: no such file")
-    names = read_vnl_names(vnl)
+    try:
+        names = read_vnl_names(vnl)
+    except CornersFileError as e:
+        raise SourceError(str(e)) from None
     if not names:
         raise SourceError(f"{vnl}: no images in it")
     seq = find_dataset(vnl, names)
@@ -129,16 +132,20 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
             raise SourceError(f"{vnl}: cannot find the pattern.json of its dataset (give --pattern)")
     except dataset.DatasetError as e:
         raise SourceError(str(e)) from None
-    with open(vnl, encoding="ascii") as f:
+    with open_corners(vnl) as f:
         try:
             boards = read_corners(f, layout.nx, layout.ny)
         except ValueError as e:
-            raise SourceError(f"{vnl}: {e} (is pattern.json the pattern of these corners?)") from None
+            raise SourceError(f"{vnl}: {e}") from None
     files = [n for n in names if mrcal_keeps(boards.get(n))]
     if not files:
         raise SourceError(f"{vnl}: no boards in it")
     corners = np.stack([boards[n] for n in files])
-    size = tuple(int(v) for v in imagersize) if imagersize is not None else imager_size(files, vnl, seq)
+    seen = imager_size(files, vnl, seq)
+    size = tuple(int(v) for v in imagersize) if imagersize is not None else seen
+    if imagersize is not None and seen is not None and seen != size:
+        raise SourceError(f"the imager size given, {size[0]}x{size[1]}, is not the size of the images of {vnl} "
+                          f"({seen[0]}x{seen[1]}, e.g. {files[0]}): give --imagersize {seen[0]} {seen[1]} or none")
     if size is None:
         raise SourceError(f"{vnl}: cannot read its images for the imager size (give --imagersize W H)")
     t = None
