@@ -34,7 +34,14 @@ boards cannot constrain) are refused before mrcal runs. A model with more
 than {100 * cal.MAX_OUTLIER_FRACTION:.0f}% outliers, an empty valid-intrinsics region, or lean and splined
 fits that disagree with no way to tell which is right, is not written
 (OUTDIR/camera-0.cameramodel is removed; the fits stay in OUTDIR/candidates/)
-unless --keep.
+unless --keep. The fit itself is checked: a board whose corners are out of
+grid order (shuffled rows, a transposed board) is dropped and named before
+mrcal runs; after each solve, a fit RMS over 1 px, a focal length not within
+2x of the boards' own estimate, or a board far off the rest makes the solve
+repeat without the boards (or, with several cameras, the pose) it names. A
+fit that stays implausible is never written, not even with --keep. Corners
+files in CRLF/CR line endings or UTF-8/16 with a byte-order mark are read as
+text and mrcal gets the normalised copy (OUTDIR/candidates/corners.vnl).
 
 Several cameras (a dataset of SEQ/poseNNN/camera-K/ folders, doc/dataset.md):
 all cameras are calibrated at once (one glob per camera, a focal seed per
