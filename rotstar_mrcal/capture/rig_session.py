@@ -32,11 +32,13 @@ import shutil
 
 import numpy as np
 
+from ..atomic import allocated_npy
 from .pose import write_segmented
 from .rig import RigSource, record_rig
 from .rig_segment import segment_rig
 from .motion import difference_signal, screen_pixels
 from .segment import SegmentError, threshold
+from .source import CaptureError
 from .session import OutputDataset, PoseOutcome, SessionOptions, process_segmented
 
 
@@ -75,8 +77,12 @@ def capture_rig_one(rig: RigSource, ds: RigDataset, pose: str, pattern: dict, la
     first = rig.read_views()
     if first is None:
         raise EOFError
-    bufs = [np.lib.format.open_memmap(os.path.join(folder, f"camera-{k}.npy"), mode="w+", dtype=f.image.dtype,
-                                      shape=(nframes,) + f.image.shape) for k, f in enumerate(first)]
+    try:
+        bufs = [allocated_npy(os.path.join(folder, f"camera-{k}.npy"), f.image.dtype, (nframes,) + f.image.shape)
+                for k, f in enumerate(first)]
+    except OSError as e:  # a full disk: said before recording, not a SIGBUS half-way
+        shutil.rmtree(folder, ignore_errors=True)
+        raise CaptureError(str(e)) from None
     try:
         recs = record_rig(rig, nframes, outs=bufs, first=first)
         n = len(recs[0].sequence)

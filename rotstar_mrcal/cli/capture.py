@@ -183,6 +183,17 @@ def print_nodes(nodes: list[dict]) -> None:
             print(f"  extension unit {name} = {v}")
 
 
+def os_error(e: OSError) -> str:
+    """'path: reason' of an OSError, in one line
+
+    >>> os_error(OSError(28, "No space left on device", "seq/pose003"))
+    'seq/pose003: No space left on device'
+    >>> os_error(OSError("seq/raw/pose003.npy: no space left on device (20 MB needed)"))
+    'seq/raw/pose003.npy: no space left on device (20 MB needed)'
+    """
+    return f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
+
+
 # ---- the session ------------------------------------------------------------------------
 def camera_names(rig: RigSource) -> list[str]:
     """What each camera of a rig is, for the log: 'left IR (Y12I 1280x800)', ..."""
@@ -380,6 +391,9 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
                 pose_no += 1
     except CaptureError as e:
         say(f"rotstar-capture: {e}")
+        return EXIT_FAILED
+    except OSError as e:  # a pose folder, capture.json, stdout that cannot be written (a full disk)
+        say(f"rotstar-capture: {os_error(e)}")
         return EXIT_FAILED
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the poses so far are kept, the summary follows
         say("rotstar-capture: interrupted")

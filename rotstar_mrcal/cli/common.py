@@ -73,6 +73,18 @@ def number_arg(kind=float, lo: float | None = None, hi: float | None = None, lo_
     return parse
 
 
+class DefaultsHelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """--help with '(default: X)' only where X means something: not after a flag, a required
+    option, a default of None or a help text that states its default; description and epilog as written"""
+
+    def _get_help_string(self, action):
+        h = action.help or ""
+        if (action.required or action.nargs == 0 or action.default in (None, argparse.SUPPRESS)
+                or isinstance(action.default, bool) or "default" in h or not action.option_strings):
+            return h
+        return h + " (default: %(default)s)"
+
+
 # ---- exit codes, one-line errors, interrupts ----------------------------------------------
 EXIT_OK = 0  # done
 EXIT_FAILED = 1  # the job ran but failed, or its result is partial
