@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
 
 import numpy as np
@@ -277,8 +280,28 @@ def snapshot(a, src: FrameSource, names: list[str]) -> int:
     return 0
 
 
+@contextlib.contextmanager
+def ctrl_c_stops():
+    """Ctrl-C (SIGINT) interrupts the capture even where it was started ignoring it
+
+    A shell script that starts a command in the background (`cmd &`) starts it
+    with SIGINT ignored; a capture session must stop on Ctrl-C (or kill -INT)
+    at any point, its pose detection included, so the handler is put back.
+    """
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.getsignal(signal.SIGINT) if main else None
+    if main and old == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        if main and old == signal.SIG_IGN:
+            signal.signal(signal.SIGINT, old)
+
+
 def main(argv=None, source: FrameSource | None = None) -> int:
-    return run("rotstar-capture", lambda argv: _main(argv, source), argv)
+    with ctrl_c_stops():
+        return run("rotstar-capture", lambda argv: _main(argv, source), argv)
 
 
 def _main(argv=None, source: FrameSource | None = None) -> int:

@@ -1,0 +1,140 @@
+"""rotstar-capture's faults, run as a user meets them: a real process on a recording of the player that
+rotstar-simulate --recording writes, a full disk (a small tmpfs), a real SIGINT while a pose is detected or
+its folder written; and rotstar-simulate's --help"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import time
+
+import pytest
+
+from rotstar_mrcal import dataset as ds
+from rotstar_mrcal.cli.simulate import parse_args as simulate_args
+from rotstar_mrcal.pattern.layout import make_layout
+
+from conftest import VENV_BIN, cli_env
+
+LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)  # 6 x 4 corners, 20 loop entries
+HOLD = 18  # 20 entries x 18 refreshes at 60 Hz: a 6 s loop, 150 camera frames at 25 fps
+FRAMES = 340  # per capture recording: > 2 loops, within the 355 still frames of a pose at --loops 1.2
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory, run_cli):
+    """(pattern folder, rec.npy): rotstar-simulate --recording of one pose, as a camera films the player"""
+    d = tmp_path_factory.mktemp("rec")
+    (d / "pattern").mkdir()
+    (d / "pattern" / "pattern.json").write_text(LAYOUT.to_json())
+    r = run_cli("rotstar-simulate", "--recording", d / "rec.npy", "--pattern", d / "pattern", "--camera",
+                "pinhole-small", "--hold", HOLD, "--loops", 1.2, "--supersample", 2)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == f"{d / 'rec.npy'}\n"
+    return d / "pattern", d / "rec.npy"
+
+
+def test_simulated_recording_segments_into_a_pose_that_detect_reads(recording, tmp_path, run_cli):
+    pattern, rec = recording
+    meta = json.loads(rec.with_suffix(".json").read_text())
+    assert meta["fps"] == 25.0 and len(meta["sequence"]) == 355 == meta["simulated"]["still_frames"]
+    r = run_cli("rotstar-segment", rec, "--pattern", pattern, "--out", tmp_path / "seq" / "pose000")
+    assert r.returncode == 0, r.stderr
+    assert "24 of 24 corners" in r.stderr
+    r = run_cli("rotstar-detect", tmp_path / "seq", "-o", tmp_path / "corners.vnl")
+    assert r.returncode == 0, r.stderr
+    rows = [ln for ln in (tmp_path / "corners.vnl").read_text().splitlines() if not ln.startswith("#")]
+    assert len(rows) == 24 and all(ln.split()[-1] != "-" for ln in rows)
+
+
+def capture_cmd(pattern, rec, out) -> list[str]:
+    return [os.path.join(VENV_BIN, "rotstar-capture"), "--backend", "replay", "--device", str(rec), "--pattern",
+            str(pattern), "--hold", str(HOLD), "--frames", str(FRAMES), "--auto", "--poses", "1", "--out", str(out)]
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 2 MB tmpfs (mounting needs root: skipped otherwise)"""
+    d = tmp_path / "disk"
+    d.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(d)], capture_output=True).returncode:
+        pytest.skip("cannot mount a tmpfs here (not root)")
+    yield d
+    subprocess.run(["umount", str(d)], check=True)
+
+
+def test_capture_onto_a_full_disk_says_so(recording, small_disk):
+    """The recording (340 frames of 640x400 x 2 bytes, 174 MB) cannot fit: one line naming it, exit 1, nothing
+    left (it was a SIGBUS, exit 135, and a sparse file of the recording's size)"""
+    pattern, rec = recording
+    r = subprocess.run(capture_cmd(pattern, rec, small_disk / "seq"), capture_output=True, text=True,
+                       env=cli_env(), stdin=subprocess.DEVNULL, timeout=60)
+    assert r.returncode == 1, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr
+    raw = small_disk / "seq" / "raw" / "pose000.npy"
+    assert f"rotstar-capture: {raw}: no space left on device (174 MB needed)" in r.stderr.splitlines()
+    assert not (small_disk / "seq" / "raw").exists() and not (small_disk / "seq" / "pose000").exists()
+
+
+def interrupt_when(pattern, rec, out, ready, ignore_sigint: bool = False, delay: float = 0.0):
+    """Run rotstar-capture, send SIGINT delay s after ready(out) holds; CompletedProcess (returncode, stderr)"""
+    p = subprocess.Popen(capture_cmd(pattern, rec, out), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=cli_env(),
+                         preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignore_sigint else None)
+    t0 = time.monotonic()
+    try:
+        while p.poll() is None and not ready(out) and time.monotonic() - t0 < 60:
+            time.sleep(0.001)
+        time.sleep(delay)
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    return subprocess.CompletedProcess(p.args, p.returncode, "", err)
+
+
+def leftovers(out) -> list[str]:
+    return sorted(f for f in os.listdir(out) if f.startswith(".")) if out.exists() else []
+
+
+def test_sigint_during_detection_stops_the_capture(recording, tmp_path):
+    """Started as a script's background job (SIGINT ignored, as the shell does): a SIGINT 0.6 s after the
+    recording's file appears (it is recorded in ~0.2 s, then split and detected for ~1.7 s) stops the session
+    at once (it was ignored: the pose was detected and written, exit 0)"""
+    pattern, rec = recording
+    out = tmp_path / "seq"
+    r = interrupt_when(pattern, rec, out, lambda o: (o / "raw" / "pose000.npy").exists(), ignore_sigint=True,
+                       delay=0.6)
+    assert r.returncode == 130, (r.returncode, r.stderr)
+    assert "rotstar-capture: interrupted" in r.stderr and "Traceback" not in r.stderr
+    assert not (out / "pose000").exists() and not (out / "raw").exists() and leftovers(out) == []
+
+
+def test_sigint_while_the_pose_folder_is_written_leaves_no_part_of_it(recording, tmp_path):
+    """SIGINT the moment the pose's folder (or its temporary one) appears: no pose folder with some of its
+    frames (it was left with 2-11 of them), no hidden temporary folder"""
+    pattern, rec = recording
+    out = tmp_path / "seq"
+    writing = lambda o: o.exists() and any(f.startswith(("pose000", ".pose000")) for f in os.listdir(o))  # noqa: E731
+    r = interrupt_when(pattern, rec, out, writing)
+    assert r.returncode in (0, 130) and "Traceback" not in r.stderr, (r.returncode, r.stderr)
+    if (out / "pose000").exists():  # the signal came after the rename: the folder is whole
+        want = {f["file"] for f in ds.read_pattern(str(pattern))[0]["frames"]} | {"segment.json"}
+        assert set(os.listdir(out / "pose000")) == want
+    else:
+        assert r.returncode == 130
+    assert leftovers(out) == []
+
+
+def test_simulate_help_shows_meaningful_defaults_and_exit_codes(capsys):
+    with pytest.raises(SystemExit):
+        simulate_args(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "(default: None)" not in text and "(default: True)" not in text and "(default: False)" not in text
+    assert "--no-identity leave out the identity frames" in text and "--out SEQ dataset folder to write (needed" in text
+    assert "--supersample SUPERSAMPLE s: s x s sub-pixels per camera pixel (default: 4)" in text
+    assert "exit status: 0 done;" in text and "130 interrupted" in text
+    assert "rotstar-simulate --recording rec.npy" in text
