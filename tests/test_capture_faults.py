@@ -4,15 +4,19 @@ its folder written; and rotstar-simulate's --help"""
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import signal
 import subprocess
+import sys
 import time
 
+import numpy as np
 import pytest
 
 from rotstar_mrcal import dataset as ds
+from rotstar_mrcal.cli.capture import main as rotstar_capture
 from rotstar_mrcal.cli.simulate import parse_args as simulate_args
 from rotstar_mrcal.pattern.layout import make_layout
 
@@ -25,12 +29,12 @@ FRAMES = 340  # per capture recording: > 2 loops, within the 355 still frames of
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory, run_cli):
-    """(pattern folder, rec.npy): rotstar-simulate --recording of one pose, as a camera films the player"""
+    """(pattern folder, rec.npy): rotstar-simulate --recording of two poses, as a camera films the player"""
     d = tmp_path_factory.mktemp("rec")
     (d / "pattern").mkdir()
     (d / "pattern" / "pattern.json").write_text(LAYOUT.to_json())
     r = run_cli("rotstar-simulate", "--recording", d / "rec.npy", "--pattern", d / "pattern", "--camera",
-                "pinhole-small", "--hold", HOLD, "--loops", 1.2, "--supersample", 2)
+                "pinhole-small", "--hold", HOLD, "--loops", 1.2, "--supersample", 2, "--poses", 2)
     assert r.returncode == 0, r.stderr
     assert r.stdout == f"{d / 'rec.npy'}\n"
     return d / "pattern", d / "rec.npy"
@@ -39,14 +43,39 @@ def recording(tmp_path_factory, run_cli):
 def test_simulated_recording_segments_into_a_pose_that_detect_reads(recording, tmp_path, run_cli):
     pattern, rec = recording
     meta = json.loads(rec.with_suffix(".json").read_text())
-    assert meta["fps"] == 25.0 and len(meta["sequence"]) == 355 == meta["simulated"]["still_frames"]
-    r = run_cli("rotstar-segment", rec, "--pattern", pattern, "--out", tmp_path / "seq" / "pose000")
+    meta = meta["simulated"]
+    assert (meta["still_frames"], meta["moving_frames"]) == (355, 25)  # 1 s + 2.2 loops of 6 s, then 1 s moving
+    first = tmp_path / "first.npy"  # the first pose's still frames: what a camera of that pose records
+    np.save(first, np.load(rec, mmap_mode="r")[:355])
+    r = run_cli("rotstar-segment", first, "--pattern", pattern, "--out", tmp_path / "seq" / "pose000")
     assert r.returncode == 0, r.stderr
     assert "24 of 24 corners" in r.stderr
     r = run_cli("rotstar-detect", tmp_path / "seq", "-o", tmp_path / "corners.vnl")
     assert r.returncode == 0, r.stderr
     rows = [ln for ln in (tmp_path / "corners.vnl").read_text().splitlines() if not ln.startswith("#")]
     assert len(rows) == 24 and all(ln.split()[-1] != "-" for ln in rows)
+
+
+def test_auto_capture_of_a_simulated_recording_takes_both_poses(recording, tmp_path, capsys):
+    """rotstar-capture --auto on the recording: the first pose at once, then the camera's move and the second pose
+    (a move the simulator did not draw, the camera never moving, gave one pose and 'the recording ended')"""
+    pattern, rec = recording
+    code = rotstar_capture(["--backend", "replay", "--device", str(rec), "--pattern", str(pattern), "--hold", str(HOLD),
+                            "--frames", "300", "--auto", "--out", str(tmp_path / "seq")])
+    out, err = capsys.readouterr()
+    assert code == 0 and out.split() == [str(tmp_path / "seq" / p) for p in ("pose000", "pose001")], err
+    assert err.count("board complete (24/24)") == 2
+
+
+def test_replay_says_it_waits_for_enter(recording, tmp_path, capsys, monkeypatch):
+    """Without --auto a replay waits for Enter before each pose: the prompt says so, and how to go on without"""
+    pattern, rec = recording
+    monkeypatch.setattr(sys, "stdin", io.StringIO("q\n"))
+    code = rotstar_capture(["--backend", "replay", "--device", str(rec), "--pattern", str(pattern), "--frames", "300",
+                            "--out", str(tmp_path / "seq")])
+    err = capsys.readouterr().err
+    assert code == 1 and ("rotstar-capture: pose000: press Enter to record the next 300 frames of the replay (q: "
+                          "quit; --auto goes on without waiting)") in err.splitlines(), err
 
 
 def capture_cmd(pattern, rec, out) -> list[str]:

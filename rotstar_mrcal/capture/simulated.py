@@ -176,13 +176,12 @@ def write_player_recording(path: str, layout, model, rts, *, hold: int, refresh_
             n = still + (move if i < len(rts) - 1 else 0)
             sched = player_schedule(n_entries, hold, refresh_hz=refresh_hz, duration=n / fps + 1.0,
                                     start_entry=int(rng.integers(n_entries)), start_phase=float(rng.uniform()))
-            for a in range(0, n, chunk):
-                m = min(chunk, n - a)
-                moving = a >= still
-                buf[k:k + m], _ = camera_stream(E, sched, m, fps=fps, exposure_s=exposure_s, t0=a / fps, gain=gain,
-                                                noise=noise, bits=bits, rng=rng,
-                                                drift_px=(2.0, 1.0) if moving else (0.0, 0.0))
-                k += m
+            for a, b, drift in ((0, still, (0.0, 0.0)), (still, n, (2.0, 1.0))):  # still, then moving
+                for c in range(a, b, chunk):
+                    m = min(chunk, b - c)
+                    buf[k:k + m], _ = camera_stream(E, sched, m, fps=fps, exposure_s=exposure_s, t0=c / fps,
+                                                    gain=gain, noise=noise, bits=bits, rng=rng, drift_px=drift)
+                    k += m
             if progress:
                 progress(f"pose {i + 1}/{len(rts)}: {still} still frames" + (f", {move} moving" if move and
                                                                               i < len(rts) - 1 else ""))

@@ -37,7 +37,9 @@ rotstar-segment does), detect the board at once and say whether it was
 complete and which parts of the imager the corners cover so far (mrcal
 needs corners near the edges and corners of the image; OUT/.../coverage.png
 shows them). Then the next pose: on Enter, or with --auto as soon as the
-view has moved and is still again.
+view has moved and is still again. A replay (--backend replay) also waits
+for Enter before each pose, then records its next frames; with --auto it
+runs through without waiting (rotstar-simulate --recording makes one to try).
 
 Default camera: an Intel RealSense D435 (--camera d435) over plain V4L2:
 the left-IR node is found by USB id and format list, the stream is Y16
@@ -73,7 +75,8 @@ examples:
   rotstar-capture --list                                   # first contact: nodes, formats, controls
   rotstar-capture --pattern pattern/ --out seq --exposure 2000,4000,8000
   rotstar-capture --pattern pattern/ --out seq --auto --poses 30
-  rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --frames 640
+  rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --frames 640   # Enter per pose
+  rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --hold 18 --auto
   rotstar-capture --pattern pattern/ --out stereo --stereo --exposure 4000          # both IR imagers
   rotstar-capture --pattern pattern/ --out rig --stereo --rgb-device /dev/video4 --rgb-exposure 300
   rotstar-detect seq/exp4000us > corners.vnl
@@ -184,6 +187,17 @@ def print_nodes(nodes: list[dict]) -> None:
             print(f"  control {name} = {v}")
         for name, v in n.get("xu", {}).items():
             print(f"  extension unit {name} = {v}")
+
+
+def enter_prompt(backend: str, nframes: int) -> str:
+    """What to do before a pose without --auto: a camera is placed; a replay just waits for Enter
+
+    >>> enter_prompt("replay", 633)
+    'press Enter to record the next 633 frames of the replay (q: quit; --auto goes on without waiting)'
+    """
+    if backend == "replay":
+        return f"press Enter to record the next {nframes} frames of the replay (q: quit; --auto goes on without waiting)"
+    return "place the camera, hold still, press Enter (q: quit)"
 
 
 def os_error(e: OSError) -> str:
@@ -379,7 +393,7 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
         while not a.poses or taken < a.poses:
             pose = f"pose{pose_no:03d}"
             if interactive:
-                say(f"rotstar-capture: {pose}: place the camera, hold still, press Enter (q: quit) ")
+                say(f"rotstar-capture: {pose}: " + enter_prompt(a.backend, nframes))
                 line = sys.stdin.readline()
                 if not line or line.strip().lower() == "q":
                     break
