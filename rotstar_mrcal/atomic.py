@@ -93,6 +93,31 @@ def atomic_folder(path: str):
         raise
 
 
+@contextlib.contextmanager
+def whole_or_none(path: str):
+    """A folder filled by several writers in turn (a rig's pose: camera-0/, camera-1/, ...): if it did not
+    exist before the block and the block raises or is interrupted, it is removed with what was written
+
+    >>> import tempfile
+    >>> d = tempfile.mkdtemp()
+    >>> try:
+    ...     with whole_or_none(os.path.join(d, "pose000")):
+    ...         os.makedirs(os.path.join(d, "pose000", "camera-0"))
+    ...         raise KeyboardInterrupt                  # before camera-1
+    ... except KeyboardInterrupt:
+    ...     pass
+    >>> os.listdir(d)
+    []
+    """
+    existed = os.path.lexists(path)
+    try:
+        yield path
+    except BaseException:
+        if not existed:
+            shutil.rmtree(path, ignore_errors=True)
+        raise
+
+
 def allocated_npy(path: str, dtype, shape: tuple) -> np.ndarray:
     """np.lib.format.open_memmap(path, "w+") with every disk block allocated up front
 

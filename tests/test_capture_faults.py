@@ -158,6 +158,33 @@ def test_sigint_while_the_pose_folder_is_written_leaves_no_part_of_it(recording,
     assert leftovers(out) == []
 
 
+def test_sigint_while_a_rig_pose_is_written_leaves_no_camera_of_it(recording, tmp_path):
+    """rotstar-segment of two cameras' recordings, SIGINT as soon as the first camera's folder appears: the new
+    pose folder is removed whole (it kept camera-0 without camera-1) or, the signal too late, holds both"""
+    pattern, rec = recording
+    cam = tmp_path / "cam.npy"
+    np.save(cam, np.load(rec, mmap_mode="r")[:355])
+    out = tmp_path / "seq" / "pose000"
+    p = subprocess.Popen([os.path.join(VENV_BIN, "rotstar-segment"), str(cam), str(cam), "--pattern", str(pattern),
+                          "--out", str(out)], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=cli_env())
+    try:
+        t0 = time.monotonic()
+        while p.poll() is None and not (out.exists() and os.listdir(out)) and time.monotonic() - t0 < 60:
+            time.sleep(0.001)
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode in (0, 130) and "Traceback" not in err, (p.returncode, err)
+    if p.returncode == 130:
+        assert not out.exists(), os.listdir(out)
+    else:
+        assert sorted(os.listdir(out)) == ["camera-0", "camera-1"]
+    assert leftovers(out.parent) == []
+
+
 def test_simulate_help_shows_meaningful_defaults_and_exit_codes(capsys):
     with pytest.raises(SystemExit):
         simulate_args(["--help"])

@@ -33,7 +33,7 @@ import os
 import numpy as np
 
 from .. import dataset
-from ..atomic import atomic_folder
+from ..atomic import atomic_folder, atomic_write
 from ..detect.pipeline import PoseCorners, detect_pose
 from ..pattern.layout import Layout, layout_from_dict
 from .segment import Segmentation
@@ -82,7 +82,7 @@ def ensure_pattern(seq: str, pattern: dict) -> str:
             raise dataset.DatasetError(f"{fn}: a different pattern is already in this dataset; "
                                        f"use another output folder")
         return fn
-    with open(fn, "w") as f:
+    with atomic_write(fn) as f:
         json.dump(pattern, f, indent=2)
         f.write("\n")
     return fn

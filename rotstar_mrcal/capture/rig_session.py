@@ -32,7 +32,7 @@ import shutil
 
 import numpy as np
 
-from ..atomic import allocated_npy
+from ..atomic import allocated_npy, whole_or_none
 from .pose import write_segmented
 from .rig import RigSource, record_rig
 from .rig_segment import segment_rig
@@ -115,6 +115,12 @@ def process_rig_recording(ds: RigDataset, pose: str, pattern: dict, layout, recs
         entry.update(ok=False, error=str(e))
         return PoseOutcome(False, [f"{ds.what(pose)}: not usable: {e}"])
     ds.tau = rs.cameras[0].tau
+    with whole_or_none(os.path.join(ds.folder, pose)):  # an interrupt leaves no pose with some of its cameras
+        return write_rig_pose(ds, pose, pattern, layout, recs, rs, entry)
+
+
+def write_rig_pose(ds: RigDataset, pose: str, pattern: dict, layout, recs, rs, entry: dict) -> PoseOutcome:
+    """Check and write every camera of one segmented rig pose (the pose is dropped whole when none saw the board)"""
     messages = [f"{ds.what(pose)}: {n}" for n in rs.notes]
     outs, entry["cameras"] = [], []
     for k, (cam, seg, r) in enumerate(zip(ds.cameras, rs.cameras, recs)):

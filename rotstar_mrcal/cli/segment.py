@@ -18,6 +18,7 @@ from ..capture.rig_segment import check_recordings, segment_rig
 from ..capture.segment import SegmentError, segment
 from ..capture.source import CaptureError
 from .segment_args import add_segment_options, options_from
+from ..atomic import whole_or_none
 from .common import EXIT_FAILED, atomic_path, atomic_write, check_output_path, fail, run, say, size_arg
 
 DESCRIPTION = """\
@@ -296,28 +297,34 @@ def _main_rig(a) -> int:
     for n in rs.notes:
         say(f"rotstar-segment: note: {n}")
     try:
-        for name, c, seg in zip(names, cams, rs.cameras):
-            scale = _scale(a, seg, c.full_scale, name)
-            gaps = int(np.sum(np.maximum(np.diff(c.sequence) - 1, 0))) if len(c.sequence) > 1 else 0
-            folder = write_segmented(seq, f"{pose}/{name}", seg, pattern, c.full_scale, scale,
-                                     {"recording": c.what, "dropped_camera_frames": gaps,
-                                      "camera": name, "boundaries_from": names[rs.reference]})
-            if not a.no_check:
-                r = quick_check(seg, layout, pattern, c.full_scale / scale)
-                n = layout.nx * layout.ny
-                say(f"rotstar-segment: {name}: board found: {r.n_valid} of {n} corners" if r.found
-                    else f"rotstar-segment: {name}: no board: {r.error}")
-                with open(os.path.join(folder, "segment.json")) as f:
-                    info = json.load(f)
-                info["quick_check"] = {"found": r.found, "corners": r.n_valid, "error": r.error,
-                                       "motion_px": r.motion_px}
-                with atomic_write(os.path.join(folder, "segment.json")) as f:
-                    json.dump(info, f, indent=1, default=float)
-                    f.write("\n")
+        with whole_or_none(out):  # an interrupt leaves no new pose folder with some of its cameras
+            _write_rig(a, out, seq, pose, names, cams, rs, pattern, layout)
     except (dataset.DatasetError, OSError, ValueError) as e:
         fail(str(e))
     print(out)
     return 0
+
+
+def _write_rig(a, out, seq, pose, names, cams, rs, pattern, layout) -> None:
+    """Every camera's frames into OUT/camera-<k>/, with its quick check"""
+    for name, c, seg in zip(names, cams, rs.cameras):
+        scale = _scale(a, seg, c.full_scale, name)
+        gaps = int(np.sum(np.maximum(np.diff(c.sequence) - 1, 0))) if len(c.sequence) > 1 else 0
+        folder = write_segmented(seq, f"{pose}/{name}", seg, pattern, c.full_scale, scale,
+                                 {"recording": c.what, "dropped_camera_frames": gaps,
+                                  "camera": name, "boundaries_from": names[rs.reference]})
+        if not a.no_check:
+            r = quick_check(seg, layout, pattern, c.full_scale / scale)
+            n = layout.nx * layout.ny
+            say(f"rotstar-segment: {name}: board found: {r.n_valid} of {n} corners" if r.found
+                else f"rotstar-segment: {name}: no board: {r.error}")
+            with open(os.path.join(folder, "segment.json")) as f:
+                info = json.load(f)
+            info["quick_check"] = {"found": r.found, "corners": r.n_valid, "error": r.error,
+                                   "motion_px": r.motion_px}
+            with atomic_write(os.path.join(folder, "segment.json")) as f:
+                json.dump(info, f, indent=1, default=float)
+                f.write("\n")
 
 
 if __name__ == "__main__":
