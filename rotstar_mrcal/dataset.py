@@ -263,7 +263,8 @@ def write_pose(seq: str, pose: str, images: dict[str, np.ndarray]) -> str:
     """Write one pose folder: {file name: uint8 or uint16 image}, each file atomically
 
     Each image is written through atomic.atomic_path: an interrupted run
-    leaves no half-written frame.
+    leaves no half-written frame. Encoded in memory and written by Python, so
+    that a full disk is an OSError with its reason (errno, the file name).
     """
     folder = os.path.join(seq, pose)
     os.makedirs(folder, exist_ok=True)
@@ -271,9 +272,14 @@ def write_pose(seq: str, pose: str, images: dict[str, np.ndarray]) -> str:
         if img.dtype not in (np.uint8, np.uint16):
             raise ValueError(f"{name}: write uint8 or uint16 images, not {img.dtype}")
         fn = os.path.join(folder, name)
-        with atomic_path(fn) as tmp:
-            if not cv2.imwrite(tmp, img):
-                raise OSError(f"cannot write {fn}")
+        ok, data = cv2.imencode(os.path.splitext(name)[1] or ".png", img)
+        if not ok:
+            raise OSError(f"{fn}: cannot encode the image")
+        try:
+            with atomic_path(fn) as tmp, open(tmp, "wb") as f:
+                f.write(data.tobytes())
+        except OSError as e:
+            raise OSError(e.errno, e.strerror, fn) from None
     return folder
 
 

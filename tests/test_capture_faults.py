@@ -85,26 +85,49 @@ def capture_cmd(pattern, rec, out) -> list[str]:
 
 @pytest.fixture
 def small_disk(tmp_path):
-    """A 2 MB tmpfs (mounting needs root: skipped otherwise)"""
-    d = tmp_path / "disk"
-    d.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(d)], capture_output=True).returncode:
-        pytest.skip("cannot mount a tmpfs here (not root)")
-    yield d
-    subprocess.run(["umount", str(d)], check=True)
+    """small_disk(kib) -> a tmpfs of that size (mounting needs root: skipped otherwise)"""
+    mounted = []
+
+    def mount(kib: int):
+        d = tmp_path / f"disk{len(mounted)}"
+        d.mkdir()
+        if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={kib}k", "tmpfs", str(d)],
+                          capture_output=True).returncode:
+            pytest.skip("cannot mount a tmpfs here (not root)")
+        mounted.append(d)
+        return d
+
+    yield mount
+    for d in mounted:
+        subprocess.run(["umount", str(d)], check=True)
 
 
 def test_capture_onto_a_full_disk_says_so(recording, small_disk):
     """The recording (340 frames of 640x400 x 2 bytes, 174 MB) cannot fit: one line naming it, exit 1, nothing
     left (it was a SIGBUS, exit 135, and a sparse file of the recording's size)"""
     pattern, rec = recording
-    r = subprocess.run(capture_cmd(pattern, rec, small_disk / "seq"), capture_output=True, text=True,
+    disk = small_disk(2048)
+    r = subprocess.run(capture_cmd(pattern, rec, disk / "seq"), capture_output=True, text=True,
                        env=cli_env(), stdin=subprocess.DEVNULL, timeout=60)
     assert r.returncode == 1, (r.returncode, r.stderr)
     assert "Traceback" not in r.stderr
-    raw = small_disk / "seq" / "raw" / "pose000.npy"
+    raw = disk / "seq" / "raw" / "pose000.npy"
     assert f"rotstar-capture: {raw}: no space left on device (174 MB needed)" in r.stderr.splitlines()
-    assert not (small_disk / "seq" / "raw").exists() and not (small_disk / "seq" / "pose000").exists()
+    assert not (disk / "seq" / "raw").exists() and not (disk / "seq" / "pose000").exists()
+
+
+def test_capture_whose_pose_folder_fills_the_disk_says_so(recording, small_disk):
+    """Room for the recording and 2 MB more: the pose's frames (~5 MB of PNGs) do not fit; one line naming the
+    pose folder and the reason, exit 1, no pose folder or temporary one (it was a traceback from cv2.imwrite)"""
+    pattern, rec = recording
+    disk = small_disk((128 + FRAMES * 640 * 400 * 2) // 1024 + 2048)
+    r = subprocess.run(capture_cmd(pattern, rec, disk / "seq"), capture_output=True, text=True,
+                       env=cli_env(), stdin=subprocess.DEVNULL, timeout=60)
+    assert r.returncode == 1 and "Traceback" not in r.stderr, (r.returncode, r.stderr)
+    last = r.stderr.splitlines()[-1]
+    assert last.startswith(f"rotstar-capture: {disk / 'seq' / 'pose000'}: cannot write ") and \
+        last.endswith(".png (No space left on device)"), r.stderr
+    assert not (disk / "seq" / "pose000").exists() and leftovers(disk / "seq") == []
 
 
 def interrupt_when(pattern, rec, out, ready, ignore_sigint: bool = False, delay: float = 0.0):

@@ -97,8 +97,12 @@ def write_segmented(seq: str, pose: str, seg: Segmentation, pattern: dict, full_
     """
     ensure_pattern(seq, pattern)
     folder = os.path.join(seq, pose)
-    with atomic_folder(folder) as tmp:  # an interrupt leaves no pose folder with some of its frames
-        write_into(tmp, seg, full_scale, scale, extra)
+    try:
+        with atomic_folder(folder) as tmp:  # an interrupt leaves no pose folder with some of its frames
+            write_into(tmp, seg, full_scale, scale, extra)
+    except OSError as e:  # name the pose folder, not the temporary one
+        what = os.path.basename(e.filename) if e.filename else "it"
+        raise OSError(f"{folder}: cannot write {what} ({e.strerror or e})") from None
     return folder
 
 
