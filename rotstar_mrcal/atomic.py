@@ -78,8 +78,8 @@ def atomic_folder(path: str):
     parent, base = os.path.split(os.path.normpath(path))
     os.makedirs(parent or ".", exist_ok=True)
     tmp = os.path.join(parent, f".{base}.{os.getpid()}-{secrets.token_hex(3)}.part")
-    os.mkdir(tmp)
     try:
+        os.mkdir(tmp)  # (inside: an interrupt right after it still removes it)
         yield tmp
         if os.path.isdir(path):
             old = tmp + ".old"

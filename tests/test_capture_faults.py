@@ -208,6 +208,32 @@ def test_sigint_while_a_rig_pose_is_written_leaves_no_camera_of_it(recording, tm
     assert leftovers(out.parent) == []
 
 
+def test_sigint_while_rotstar_simulate_writes_a_pose_leaves_no_part_of_it(recording, tmp_path):
+    """rotstar-simulate, SIGINT the moment a pose folder (or its temporary one) appears: every pose folder left is
+    whole (all 19 frames of the pattern; one was left with some of them), no temporary folder"""
+    out = tmp_path / "sim"
+    p = subprocess.Popen([os.path.join(VENV_BIN, "rotstar-simulate"), "--out", str(out), "--camera", "pinhole-small",
+                          "--pattern", str(recording[0]), "--poses", "3", "--supersample", "1"],
+                         stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=cli_env())
+    try:
+        t0 = time.monotonic()
+        while p.poll() is None and not (out.exists() and any("pose" in f for f in os.listdir(out))) \
+                and time.monotonic() - t0 < 60:
+            time.sleep(0.001)
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130 and "Traceback" not in err, (p.returncode, err)
+    want = {f["file"] for f in ds.read_pattern(str(out))[0]["frames"]}
+    assert len(want) == 19
+    for pose in (f for f in os.listdir(out) if f.startswith("pose")):
+        assert set(os.listdir(out / pose)) == want, pose
+    assert leftovers(out) == []
+
+
 def test_simulate_help_shows_meaningful_defaults_and_exit_codes(capsys):
     with pytest.raises(SystemExit):
         simulate_args(["--help"])
