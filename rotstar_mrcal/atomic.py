@@ -130,7 +130,13 @@ def allocated_npy(path: str, dtype, shape: tuple) -> np.ndarray:
     try:
         buf = np.lib.format.open_memmap(path, mode="w+", dtype=dtype, shape=tuple(shape))
         with open(path, "r+b") as f:
-            os.posix_fallocate(f.fileno(), 0, os.fstat(f.fileno()).st_size)
+            try:
+                os.posix_fallocate(f.fileno(), 0, os.fstat(f.fileno()).st_size)
+            except OSError as e:  # a file system that cannot allocate: the free space, at least, is checked
+                if e.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
+                    raise
+                if shutil.disk_usage(os.path.dirname(os.path.abspath(path))).free < nbytes:
+                    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)) from None
     except OSError as e:
         with contextlib.suppress(OSError):
             os.remove(path)
