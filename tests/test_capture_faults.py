@@ -234,6 +234,20 @@ def test_sigint_while_rotstar_simulate_writes_a_pose_leaves_no_part_of_it(record
     assert leftovers(out) == []
 
 
+def test_a_stdout_that_cannot_be_written_is_one_line(recording, tmp_path):
+    """stdout on a full disk (/dev/full): 'stdout: No space left on device', exit 1 (it was a traceback)"""
+    pattern, rec = recording
+    cam = tmp_path / "cam.npy"
+    np.save(cam, np.load(rec, mmap_mode="r")[:355])
+    with open("/dev/full", "w") as full:
+        r = subprocess.run([os.path.join(VENV_BIN, "rotstar-segment"), str(cam), "--pattern", str(pattern), "--out",
+                            str(tmp_path / "seq" / "pose000"), "--no-check"], stdout=full, stderr=subprocess.PIPE,
+                           text=True, env=cli_env(), timeout=60)
+    assert r.returncode == 1 and r.stderr.splitlines()[-1] == "rotstar-segment: stdout: No space left on device", \
+        r.stderr
+    assert "Traceback" not in r.stderr and "Exception ignored" not in r.stderr
+
+
 def test_simulate_help_shows_meaningful_defaults_and_exit_codes(capsys):
     with pytest.raises(SystemExit):
         simulate_args(["--help"])

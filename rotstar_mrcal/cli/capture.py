@@ -23,8 +23,8 @@ from ..capture.session import OutputDataset, SessionOptions, capture_one, next_f
 from ..capture.source import CaptureError, ControlError, FrameSource, skip
 from ..display.loop import player_loop
 from ..display.player import DEFAULT_HOLD
-from .common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_INTERRUPTED, atomic_write, check_output_path, fail, run, \
-    say, size_arg
+from .common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_INTERRUPTED, atomic_write, check_output_path, fail, out_line, \
+    run, say, size_arg
 from .segment_args import add_segment_options, options_from
 
 DESCRIPTION = """\
@@ -413,7 +413,7 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
                     for m in out.messages:
                         say(f"rotstar-capture: {m}")
                     if out.folder:
-                        print(out.folder, flush=True)
+                        out_line(out.folder)
                     ok_any |= out.ok
             except EOFError:
                 say("rotstar-capture: the recording ended")

@@ -18,6 +18,19 @@ def say(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+def out_line(line: str) -> None:
+    """One line of a command's result on stdout, flushed; a stdout that cannot take it (a full disk, a
+    closed pipe) stops the command with 'stdout: reason' (exit 1) instead of a traceback"""
+    try:
+        print(line, flush=True)
+    except OSError as e:
+        try:  # (nothing left for the interpreter to flush at exit, which would say it again)
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        fail(f"stdout: {e.strerror or e}", EXIT_FAILED)
+
+
 class Progress:
     """'[k/n] label: message' lines on stderr, with a rate once it is slow"""
 

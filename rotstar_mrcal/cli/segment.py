@@ -19,7 +19,7 @@ from ..capture.segment import SegmentError, segment
 from ..capture.source import CaptureError
 from .segment_args import add_segment_options, options_from
 from ..atomic import whole_or_none
-from .common import EXIT_FAILED, atomic_path, atomic_write, check_output_path, fail, run, say, size_arg
+from .common import EXIT_FAILED, atomic_path, atomic_write, check_output_path, fail, out_line, run, say, size_arg
 
 DESCRIPTION = """\
 Split a continuous recording of player.html (the start marker, then every
@@ -210,7 +210,7 @@ def _main(argv=None) -> int:
         with atomic_write(os.path.join(folder, "segment.json")) as f:
             json.dump(info, f, indent=1, default=float)
             f.write("\n")
-    print(folder)
+    out_line(folder)
     return 0
 
 
@@ -301,7 +301,7 @@ def _main_rig(a) -> int:
             _write_rig(a, out, seq, pose, names, cams, rs, pattern, layout)
     except (dataset.DatasetError, OSError, ValueError) as e:
         fail(str(e))
-    print(out)
+    out_line(out)
     return 0
 
 

@@ -42,7 +42,8 @@ from ..simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_dataset
 from ..simulate.screen import exact_frames, png_frames, shown_light
 from ..capture.simulated import write_player_recording
 from ..display.player import DEFAULT_HOLD
-from .common import EXIT_CODES_HELP, EXIT_FAILED, DefaultsHelpFormatter, check_output_path, fail, number_arg, run
+from .common import EXIT_CODES_HELP, EXIT_FAILED, DefaultsHelpFormatter, check_output_path, fail, number_arg, \
+    out_line, run
 
 DESCRIPTION = """\
 Render a synthetic dataset: the rotating-star screen seen by a camera at
@@ -331,7 +332,7 @@ def _rig(args, layout, frames, cams, distance, say, gammas: dict) -> int:
                                            "max_tilt_deg": args.max_tilt, "margin_px": args.margin, **gammas},
                       seidel=args.seidel)
     thin = [k for k in range(len(cams)) if seen[:, k].sum() < 2]
-    print(args.out)
+    out_line(args.out)
     if thin:
         say(f"warning: camera-{thin[0]} sees fewer than 2 poses; mrcal needs at least 2 per camera (more --poses)")
         return EXIT_FAILED
@@ -358,7 +359,7 @@ def _recording(args, layout, model, camera: str, encoded: float, say) -> int:
         fail(str(e) if not e.filename else f"{e.filename}: {e.strerror}", EXIT_FAILED)
     say(f"{args.recording}: {n} frames; next: rotstar-capture --backend replay --device {args.recording} "
         f"--pattern {args.pattern} --hold {args.hold} --loops {args.loops:g} --auto --out seq/")
-    print(args.recording)
+    out_line(args.recording)
     return 0
 
 
@@ -448,7 +449,7 @@ def _main(argv=None) -> int:
         )
     except (DatasetError, ValueError, RuntimeError, OSError) as e:
         fail(f"error: {e}", EXIT_FAILED)
-    print(args.out)
+    out_line(args.out)
     return 0
 
 
