@@ -32,7 +32,7 @@ import shutil
 
 import numpy as np
 
-from ..atomic import allocated_npy, whole_or_none
+from ..atomic import allocated_npy, atomic_write, whole_or_none
 from .pose import write_segmented
 from .rig import RigSource, record_rig
 from .rig_segment import segment_rig
@@ -62,7 +62,7 @@ class RigDataset:
 def save_raw(folder: str, recs, fps: float, exposure) -> None:
     """The sequence numbers and time stamps of each camera's recording beside its .npy"""
     for k, r in enumerate(recs):
-        with open(os.path.join(folder, f"camera-{k}.json"), "w") as f:
+        with atomic_write(os.path.join(folder, f"camera-{k}.json")) as f:
             json.dump({"sequence": [int(v) for v in r.sequence], "t_ns": [int(v) for v in r.t_ns], "fps": fps,
                        "exposure_us": exposure, "frames": len(r.sequence)}, f)
             f.write("\n")

@@ -27,7 +27,7 @@ import os
 import cv2
 import numpy as np
 
-from ..atomic import allocated_npy, atomic_path
+from ..atomic import allocated_npy, atomic_path, atomic_write
 from ..detect.display import DisplayCheck, dataset_offsets
 from ..vnl import mrcal_keeps, mrcal_min_corners
 from . import coverage
@@ -168,7 +168,7 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
         n = len(seqnums)
         if opts.keep_raw:
             buf.flush()
-            with open(os.path.join(raw_dir, tag + ".json"), "w") as f:
+            with atomic_write(os.path.join(raw_dir, tag + ".json")) as f:
                 json.dump({"sequence": [int(v) for v in seqnums], "fps": src.fps, "exposure_us": ds.exposure,
                            "frames": n}, f)
         short = [f"{ds.what(pose)}: the source ended after {n} of {nframes} frames"] if n < nframes else []
