@@ -39,7 +39,7 @@ import stat
 import cv2
 import numpy as np
 
-from .atomic import atomic_path
+from .atomic import atomic_folder, atomic_path
 from .pattern.layout import Layout, layout_from_dict
 
 
@@ -260,20 +260,37 @@ def _optional(folder: str, frames: list[dict], kind: str, shape) -> np.ndarray |
 
 
 def write_pose(seq: str, pose: str, images: dict[str, np.ndarray]) -> str:
-    """Write one pose folder: {file name: uint8 or uint16 image}, each file atomically
+    """Write one pose folder: {file name: uint8 or uint16 image}, whole or not at all
 
-    Each image is written through atomic.atomic_path: an interrupted run
-    leaves no half-written frame.
+    A new folder is written under a temporary name and renamed when complete
+    (atomic.atomic_folder): an interrupted run leaves no pose with some of its
+    frames. Into a folder that exists, each image is written through
+    atomic.atomic_path: no half-written frame. Encoded in memory and written
+    by Python, so that a full disk is an OSError with its reason (errno, the
+    file name).
     """
     folder = os.path.join(seq, pose)
-    os.makedirs(folder, exist_ok=True)
+    if not os.path.isdir(folder):
+        try:
+            with atomic_folder(folder) as tmp:
+                write_pose(os.path.dirname(tmp), os.path.basename(tmp), images)
+        except OSError as e:  # name the file in the pose folder, not in the temporary one
+            if e.errno is None or not e.filename:
+                raise
+            raise OSError(e.errno, e.strerror, os.path.join(folder, os.path.basename(e.filename))) from None
+        return folder
     for name, img in images.items():
         if img.dtype not in (np.uint8, np.uint16):
             raise ValueError(f"{name}: write uint8 or uint16 images, not {img.dtype}")
         fn = os.path.join(folder, name)
-        with atomic_path(fn) as tmp:
-            if not cv2.imwrite(tmp, img):
-                raise OSError(f"cannot write {fn}")
+        ok, data = cv2.imencode(os.path.splitext(name)[1] or ".png", img)
+        if not ok:
+            raise OSError(f"{fn}: cannot encode the image")
+        try:
+            with atomic_path(fn) as tmp, open(tmp, "wb") as f:
+                f.write(data.tobytes())
+        except OSError as e:
+            raise OSError(e.errno, e.strerror, fn) from None
     return folder
 
 

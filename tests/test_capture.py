@@ -207,7 +207,7 @@ def test_capture_interactive_and_failures(loop_frames, pattern_dir, tmp_path, ca
                                   "--out", tmp_path / "a", "--frames", 360], capsys, stdin="\nq\n",
                                  monkeypatch=monkeypatch)
     assert code == 0, err
-    assert "pose000: place the camera, hold still, press Enter" in err and "pose001: place" in err
+    assert "pose000: press Enter to record the next 360 frames of the replay" in err and "pose001: press" in err
     assert out.split() == [str(tmp_path / "a" / "pose000")] and not (tmp_path / "a" / "raw").exists()
     # a recording shorter than a loop (here: without the start marker): said so, nothing written, exit 1
     code, out, err = run_capture(["--backend", "replay", "--device", tmp_path / "still.npy", "--pattern", pattern_dir,

@@ -33,6 +33,7 @@ import os
 import numpy as np
 
 from .. import dataset
+from ..atomic import atomic_folder, atomic_write
 from ..detect.pipeline import PoseCorners, detect_pose
 from ..pattern.layout import Layout, layout_from_dict
 from .segment import Segmentation
@@ -81,7 +82,7 @@ def ensure_pattern(seq: str, pattern: dict) -> str:
             raise dataset.DatasetError(f"{fn}: a different pattern is already in this dataset; "
                                        f"use another output folder")
         return fn
-    with open(fn, "w") as f:
+    with atomic_write(fn) as f:
         json.dump(pattern, f, indent=2)
         f.write("\n")
     return fn
@@ -89,10 +90,26 @@ def ensure_pattern(seq: str, pattern: dict) -> str:
 
 def write_segmented(seq: str, pose: str, seg: Segmentation, pattern: dict, full_scale: float,
                     scale: float = 1.0, extra: dict | None = None) -> str:
-    """Write seq/<pose>/<file>.png for every frame of pattern.json, and segment.json; returns the folder"""
+    """Write seq/<pose>/<file>.png for every frame of pattern.json, and segment.json; returns the folder
+
+    The folder is written whole or not at all (atomic.atomic_folder): a
+    temporary folder beside it, renamed when complete (replacing one there).
+    """
     ensure_pattern(seq, pattern)
-    folder = dataset.write_pose(seq, pose, {f: encode_average(img, full_scale, scale)
-                                            for f, img in seg.images.items()})
+    folder = os.path.join(seq, pose)
+    try:
+        with atomic_folder(folder) as tmp:  # an interrupt leaves no pose folder with some of its frames
+            write_into(tmp, seg, full_scale, scale, extra)
+    except OSError as e:  # name the pose folder, not the temporary one
+        what = os.path.basename(e.filename) if e.filename else "it"
+        raise OSError(f"{folder}: cannot write {what} ({e.strerror or e})") from None
+    return folder
+
+
+def write_into(folder: str, seg: Segmentation, full_scale: float, scale: float = 1.0, extra: dict | None = None) -> None:
+    """The frames and segment.json of write_segmented, into an existing folder"""
+    dataset.write_pose(os.path.dirname(folder), os.path.basename(folder),
+                       {f: encode_average(img, full_scale, scale) for f, img in seg.images.items()})
     v = seg.loop
     info = {
         "format": "rotstar-segment/1",
@@ -112,7 +129,6 @@ def write_segmented(seq: str, pose: str, seg: Segmentation, pattern: dict, full_
     with open(os.path.join(folder, "segment.json"), "w") as f:
         json.dump(info, f, indent=1, default=float)
         f.write("\n")
-    return folder
 
 
 def quick_check(seg: Segmentation, layout: Layout, pattern: dict, full_scale: float) -> PoseCorners:

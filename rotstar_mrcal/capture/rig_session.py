@@ -32,11 +32,13 @@ import shutil
 
 import numpy as np
 
+from ..atomic import allocated_npy, atomic_write, whole_or_none
 from .pose import write_segmented
 from .rig import RigSource, record_rig
 from .rig_segment import segment_rig
 from .motion import difference_signal, screen_pixels
 from .segment import SegmentError, threshold
+from .source import CaptureError
 from .session import OutputDataset, PoseOutcome, SessionOptions, process_segmented
 
 
@@ -60,7 +62,7 @@ class RigDataset:
 def save_raw(folder: str, recs, fps: float, exposure) -> None:
     """The sequence numbers and time stamps of each camera's recording beside its .npy"""
     for k, r in enumerate(recs):
-        with open(os.path.join(folder, f"camera-{k}.json"), "w") as f:
+        with atomic_write(os.path.join(folder, f"camera-{k}.json")) as f:
             json.dump({"sequence": [int(v) for v in r.sequence], "t_ns": [int(v) for v in r.t_ns], "fps": fps,
                        "exposure_us": exposure, "frames": len(r.sequence)}, f)
             f.write("\n")
@@ -75,8 +77,12 @@ def capture_rig_one(rig: RigSource, ds: RigDataset, pose: str, pattern: dict, la
     first = rig.read_views()
     if first is None:
         raise EOFError
-    bufs = [np.lib.format.open_memmap(os.path.join(folder, f"camera-{k}.npy"), mode="w+", dtype=f.image.dtype,
-                                      shape=(nframes,) + f.image.shape) for k, f in enumerate(first)]
+    try:
+        bufs = [allocated_npy(os.path.join(folder, f"camera-{k}.npy"), f.image.dtype, (nframes,) + f.image.shape)
+                for k, f in enumerate(first)]
+    except OSError as e:  # a full disk: said before recording, not a SIGBUS half-way
+        shutil.rmtree(folder, ignore_errors=True)
+        raise CaptureError(str(e)) from None
     try:
         recs = record_rig(rig, nframes, outs=bufs, first=first)
         n = len(recs[0].sequence)
@@ -109,6 +115,12 @@ def process_rig_recording(ds: RigDataset, pose: str, pattern: dict, layout, recs
         entry.update(ok=False, error=str(e))
         return PoseOutcome(False, [f"{ds.what(pose)}: not usable: {e}"])
     ds.tau = rs.cameras[0].tau
+    with whole_or_none(os.path.join(ds.folder, pose)):  # an interrupt leaves no pose with some of its cameras
+        return write_rig_pose(ds, pose, pattern, layout, recs, rs, entry)
+
+
+def write_rig_pose(ds: RigDataset, pose: str, pattern: dict, layout, recs, rs, entry: dict) -> PoseOutcome:
+    """Check and write every camera of one segmented rig pose (the pose is dropped whole when none saw the board)"""
     messages = [f"{ds.what(pose)}: {n}" for n in rs.notes]
     outs, entry["cameras"] = [], []
     for k, (cam, seg, r) in enumerate(zip(ds.cameras, rs.cameras, recs)):

@@ -27,14 +27,14 @@ import os
 import cv2
 import numpy as np
 
-from ..atomic import atomic_path
+from ..atomic import allocated_npy, atomic_path, atomic_write
 from ..detect.display import DisplayCheck, dataset_offsets
 from ..vnl import mrcal_keeps, mrcal_min_corners
 from . import coverage
 from .motion import difference_signal, downsample, is_still, screen_pixels
 from .pose import quick_check, value_scale, write_segmented
 from .segment import Options, SegmentError, segment, threshold
-from .source import FrameSource, record
+from .source import CaptureError, FrameSource, record
 
 
 @dataclasses.dataclass
@@ -147,8 +147,9 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
                 opts: SessionOptions) -> PoseOutcome:
     """Record nframes, then process_recording; raises EOFError when the source has nothing left
 
-    The recording goes to raw_dir/<pose>[_exp<us>us].npy, removed afterwards
-    unless opts.keep_raw.
+    The recording goes to raw_dir/<pose>[_exp<us>us].npy (its disk space
+    allocated first: CaptureError "...: no space left on device" if there is
+    none), removed afterwards unless opts.keep_raw.
     """
     os.makedirs(raw_dir, exist_ok=True)
     tag = f"{pose}_exp{ds.exposure}us" if ds.exposure else pose
@@ -156,7 +157,10 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
     first = src.read()
     if first is None:
         raise EOFError
-    buf = np.lib.format.open_memmap(raw, mode="w+", dtype=first.image.dtype, shape=(nframes,) + first.image.shape)
+    try:
+        buf = allocated_npy(raw, first.image.dtype, (nframes,) + first.image.shape)
+    except OSError as e:  # a full disk: said before recording, not a SIGBUS half-way
+        raise CaptureError(str(e)) from None
     try:
         buf[0] = first.image
         rec = record(src, nframes - 1, out=buf[1:]) if nframes > 1 else None
@@ -164,7 +168,7 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
         n = len(seqnums)
         if opts.keep_raw:
             buf.flush()
-            with open(os.path.join(raw_dir, tag + ".json"), "w") as f:
+            with atomic_write(os.path.join(raw_dir, tag + ".json")) as f:
                 json.dump({"sequence": [int(v) for v in seqnums], "fps": src.fps, "exposure_us": ds.exposure,
                            "frames": n}, f)
         short = [f"{ds.what(pose)}: the source ended after {n} of {nframes} frames"] if n < nframes else []

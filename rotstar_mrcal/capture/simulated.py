@@ -29,12 +29,18 @@ from it:
   is a row-dependent blend of two entries. Then the sensor (simulate.expose:
   gain, noise, quantisation), frames listed in drop_frames are lost (a gap
   in the sequence numbers), and drift_px moves the image by that much per
-  frame (a camera that is not still).
+  frame (a camera that is not still);
+- write_player_recording: a whole session as a replayable recording (.npy +
+  .json), pose after pose with the camera moving in between: what
+  `rotstar-simulate --recording` writes.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
+import math
+import os
 
 import cv2
 import numpy as np
@@ -128,3 +134,65 @@ def camera_stream(E: np.ndarray, sched: list[Shown], n: int, fps: float = 25.0, 
         frames.append(expose(img, gain=gain, noise=noise, bits=bits, value_bits=value_bits, rng=rng))
         seq.append(i)
     return np.stack(frames), np.array(seq)
+
+
+def pose_frames(fps: float, loop_s: float, loops: float, still_s: float) -> int:
+    """Camera frames one pose of a simulated session holds still: --still s, then loops of the player, then one more
+
+    >>> pose_frames(25, 10.0, 2.2, 1.0)      # 1 s + 2.2 loops + 1 loop of margin
+    825
+    """
+    return int(math.ceil((still_s + (loops + 1) * loop_s) * fps))
+
+
+def write_player_recording(path: str, layout, model, rts, *, hold: int, refresh_hz: float = 60.0,
+                           fps: float = 25.0, loops: float = 2.2, still_s: float = 1.0, move_s: float = 1.0,
+                           exposure_s: float = 0.016, gain: float = 0.9, noise: float = 0.01, bits: int = 16,
+                           room: float = 0.02, supersample: int = 4, psf=1.0, frames=None, seed: int = 0,
+                           progress=None, chunk: int = 32) -> int:
+    """A camera filming the looping player from each pose of rts in turn, as path (.npy + .json); returns frames
+
+    Per pose the camera holds still for pose_frames (enough for rotstar-capture
+    --auto to see stillness and record `loops` loops), starting at a random
+    point of the loop, then moves for move_s seconds (the image drifts) before
+    the next pose. The file's disk space is allocated first (a full disk: an
+    OSError naming it, nothing left behind); frames are rendered in chunks.
+    The .json beside it (backend_replay) holds the sequence numbers and fps.
+    """
+    from ..atomic import allocated_npy, atomic_write
+
+    n_entries = len(player_loop(layout.frames()))
+    loop_s = n_entries * hold / refresh_hz
+    still = pose_frames(fps, loop_s, loops, still_s)
+    move = int(math.ceil(move_s * fps)) if len(rts) > 1 else 0
+    total = len(rts) * still + (len(rts) - 1) * move
+    W, H = (int(v) for v in model.imagersize())
+    rng = np.random.default_rng([4, seed])
+    buf = allocated_npy(path, np.uint8 if bits == 8 else np.uint16, (total, H, W))
+    try:
+        k = 0
+        for i, rt in enumerate(rts):
+            E = loop_irradiance(layout, model, rt, supersample=supersample, psf=psf, room=room, frames=frames)
+            n = still + (move if i < len(rts) - 1 else 0)
+            sched = player_schedule(n_entries, hold, refresh_hz=refresh_hz, duration=n / fps + 1.0,
+                                    start_entry=int(rng.integers(n_entries)), start_phase=float(rng.uniform()))
+            for a, b, drift in ((0, still, (0.0, 0.0)), (still, n, (2.0, 1.0))):  # still, then moving
+                for c in range(a, b, chunk):
+                    m = min(chunk, b - c)
+                    buf[k:k + m], _ = camera_stream(E, sched, m, fps=fps, exposure_s=exposure_s, t0=c / fps,
+                                                    gain=gain, noise=noise, bits=bits, rng=rng, drift_px=drift)
+                    k += m
+            if progress:
+                progress(f"pose {i + 1}/{len(rts)}: {still} still frames" + (f", {move} moving" if move and
+                                                                              i < len(rts) - 1 else ""))
+        buf.flush()
+        with atomic_write(os.path.splitext(path)[0] + ".json") as f:
+            json.dump({"sequence": list(range(total)), "fps": float(fps), "simulated": {
+                "poses": len(rts), "still_frames": still, "moving_frames": move, "hold": hold,
+                "refresh_hz": refresh_hz, "loops": loops}}, f)
+            f.write("\n")
+    except BaseException:
+        del buf
+        os.remove(path)
+        raise
+    return total

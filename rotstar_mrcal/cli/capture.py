@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
 
 import numpy as np
@@ -20,8 +23,8 @@ from ..capture.session import OutputDataset, SessionOptions, capture_one, next_f
 from ..capture.source import CaptureError, ControlError, FrameSource, skip
 from ..display.loop import player_loop
 from ..display.player import DEFAULT_HOLD
-from .common import EXIT_FAILED, HelpFormatter, exit_status_help, EXIT_INTERRUPTED, atomic_write, check_output_path, fail, run, \
-    say, size_arg
+from .common import EXIT_FAILED, EXIT_INTERRUPTED, HelpFormatter, atomic_write, check_output_path, exit_status_help, fail, \
+    out_line, run, say, size_arg
 from .segment_args import add_segment_options, options_from
 
 DESCRIPTION = """\
@@ -34,7 +37,9 @@ rotstar-segment does), detect the board at once and say whether it was
 complete and which parts of the imager the corners cover so far (mrcal
 needs corners near the edges and corners of the image; OUT/.../coverage.png
 shows them). Then the next pose: on Enter, or with --auto as soon as the
-view has moved and is still again.
+view has moved and is still again. A replay (--backend replay) also waits
+for Enter before each pose, then records its next frames; with --auto it
+runs through without waiting (rotstar-simulate --recording makes one to try).
 
 Default camera: an Intel RealSense D435 (--camera d435) over plain V4L2:
 the left-IR node is found by USB id and format list, the stream is Y16
@@ -70,7 +75,8 @@ examples:
   rotstar-capture --list                                   # first contact: nodes, formats, controls
   rotstar-capture --pattern pattern/ --out seq --exposure 2000,4000,8000
   rotstar-capture --pattern pattern/ --out seq --auto --poses 30
-  rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --frames 640
+  rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --frames 640   # Enter per pose
+  rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --hold 18 --auto
   rotstar-capture --pattern pattern/ --out stereo --stereo --exposure 4000          # both IR imagers
   rotstar-capture --pattern pattern/ --out rig --stereo --rgb-device /dev/video4 --rgb-exposure 300
   rotstar-detect seq/exp4000us > corners.vnl
@@ -183,6 +189,28 @@ def print_nodes(nodes: list[dict]) -> None:
             print(f"  extension unit {name} = {v}")
 
 
+def enter_prompt(backend: str, nframes: int) -> str:
+    """What to do before a pose without --auto: a camera is placed; a replay just waits for Enter
+
+    >>> enter_prompt("replay", 633)
+    'press Enter to record the next 633 frames of the replay (q: quit; --auto goes on without waiting)'
+    """
+    if backend == "replay":
+        return f"press Enter to record the next {nframes} frames of the replay (q: quit; --auto goes on without waiting)"
+    return "place the camera, hold still, press Enter (q: quit)"
+
+
+def os_error(e: OSError) -> str:
+    """'path: reason' of an OSError, in one line
+
+    >>> os_error(OSError(28, "No space left on device", "seq/pose003"))
+    'seq/pose003: No space left on device'
+    >>> os_error(OSError("seq/raw/pose003.npy: no space left on device (20 MB needed)"))
+    'seq/raw/pose003.npy: no space left on device (20 MB needed)'
+    """
+    return f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
+
+
 # ---- the session ------------------------------------------------------------------------
 def camera_names(rig: RigSource) -> list[str]:
     """What each camera of a rig is, for the log: 'left IR (Y12I 1280x800)', ..."""
@@ -266,8 +294,28 @@ def snapshot(a, src: FrameSource, names: list[str]) -> int:
     return 0
 
 
+@contextlib.contextmanager
+def ctrl_c_stops():
+    """Ctrl-C (SIGINT) interrupts the capture even where it was started ignoring it
+
+    A shell script that starts a command in the background (`cmd &`) starts it
+    with SIGINT ignored; a capture session must stop on Ctrl-C (or kill -INT)
+    at any point, its pose detection included, so the handler is put back.
+    """
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.getsignal(signal.SIGINT) if main else None
+    if main and old == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        if main and old == signal.SIG_IGN:
+            signal.signal(signal.SIGINT, old)
+
+
 def main(argv=None, source: FrameSource | None = None) -> int:
-    return run("rotstar-capture", lambda argv: _main(argv, source), argv)
+    with ctrl_c_stops():
+        return run("rotstar-capture", lambda argv: _main(argv, source), argv)
 
 
 def _main(argv=None, source: FrameSource | None = None) -> int:
@@ -345,7 +393,7 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
         while not a.poses or taken < a.poses:
             pose = f"pose{pose_no:03d}"
             if interactive:
-                say(f"rotstar-capture: {pose}: place the camera, hold still, press Enter (q: quit) ")
+                say(f"rotstar-capture: {pose}: " + enter_prompt(a.backend, nframes))
                 line = sys.stdin.readline()
                 if not line or line.strip().lower() == "q":
                     break
@@ -365,7 +413,7 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
                     for m in out.messages:
                         say(f"rotstar-capture: {m}")
                     if out.folder:
-                        print(out.folder, flush=True)
+                        out_line(out.folder)
                     ok_any |= out.ok
             except EOFError:
                 say("rotstar-capture: the recording ended")
@@ -380,6 +428,9 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
                 pose_no += 1
     except CaptureError as e:
         say(f"rotstar-capture: {e}")
+        return EXIT_FAILED
+    except OSError as e:  # a pose folder, capture.json, stdout that cannot be written (a full disk)
+        say(f"rotstar-capture: {os_error(e)}")
         return EXIT_FAILED
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the poses so far are kept, the summary follows
         say("rotstar-capture: interrupted")

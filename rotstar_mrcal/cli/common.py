@@ -21,6 +21,19 @@ def say(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+def out_line(line: str) -> None:
+    """One line of a command's result on stdout, flushed; a stdout that cannot take it (a full disk, a
+    closed pipe) stops the command with 'stdout: reason' (exit 1) instead of a traceback"""
+    try:
+        print(line, flush=True)
+    except OSError as e:
+        try:  # (nothing left for the interpreter to flush at exit, which would say it again)
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        fail(f"stdout: {e.strerror or e}", EXIT_FAILED)
+
+
 class Progress:
     """'[k/n] label: message' lines on stderr, with a rate once it is slow"""
 
@@ -125,7 +138,7 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
     def _get_help_string(self, action):
         h = action.help or ""
         if ("default" in h.lower() or any(action.default is v for v in (None, False, True, argparse.SUPPRESS))
-                or not action.option_strings or action.default == []):
+                or not action.option_strings or action.default == [] or action.required or action.nargs == 0):
             return h
         return h + " (default: %(default)s)"
 

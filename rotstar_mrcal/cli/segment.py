@@ -18,7 +18,9 @@ from ..capture.rig_segment import check_recordings, segment_rig
 from ..capture.segment import SegmentError, segment
 from ..capture.source import CaptureError
 from .segment_args import add_segment_options, options_from
-from .common import EXIT_FAILED, HelpFormatter, exit_status_help, atomic_path, atomic_write, check_output_path, fail, run, say, size_arg
+from ..atomic import whole_or_none
+from .common import (EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, exit_status_help, fail,
+                     out_line, run, say, size_arg)
 
 DESCRIPTION = """\
 Split a continuous recording of player.html (the start marker, then every
@@ -208,7 +210,7 @@ def _main(argv=None) -> int:
         with atomic_write(os.path.join(folder, "segment.json")) as f:
             json.dump(info, f, indent=1, default=float)
             f.write("\n")
-    print(folder)
+    out_line(folder)
     return 0
 
 
@@ -295,28 +297,34 @@ def _main_rig(a) -> int:
     for n in rs.notes:
         say(f"rotstar-segment: note: {n}")
     try:
-        for name, c, seg in zip(names, cams, rs.cameras):
-            scale = _scale(a, seg, c.full_scale, name)
-            gaps = int(np.sum(np.maximum(np.diff(c.sequence) - 1, 0))) if len(c.sequence) > 1 else 0
-            folder = write_segmented(seq, f"{pose}/{name}", seg, pattern, c.full_scale, scale,
-                                     {"recording": c.what, "dropped_camera_frames": gaps,
-                                      "camera": name, "boundaries_from": names[rs.reference]})
-            if not a.no_check:
-                r = quick_check(seg, layout, pattern, c.full_scale / scale)
-                n = layout.nx * layout.ny
-                say(f"rotstar-segment: {name}: board found: {r.n_valid} of {n} corners" if r.found
-                    else f"rotstar-segment: {name}: no board: {r.error}")
-                with open(os.path.join(folder, "segment.json")) as f:
-                    info = json.load(f)
-                info["quick_check"] = {"found": r.found, "corners": r.n_valid, "error": r.error,
-                                       "motion_px": r.motion_px}
-                with atomic_write(os.path.join(folder, "segment.json")) as f:
-                    json.dump(info, f, indent=1, default=float)
-                    f.write("\n")
+        with whole_or_none(out):  # an interrupt leaves no new pose folder with some of its cameras
+            _write_rig(a, out, seq, pose, names, cams, rs, pattern, layout)
     except (dataset.DatasetError, OSError, ValueError) as e:
         fail(str(e))
-    print(out)
+    out_line(out)
     return 0
+
+
+def _write_rig(a, out, seq, pose, names, cams, rs, pattern, layout) -> None:
+    """Every camera's frames into OUT/camera-<k>/, with its quick check"""
+    for name, c, seg in zip(names, cams, rs.cameras):
+        scale = _scale(a, seg, c.full_scale, name)
+        gaps = int(np.sum(np.maximum(np.diff(c.sequence) - 1, 0))) if len(c.sequence) > 1 else 0
+        folder = write_segmented(seq, f"{pose}/{name}", seg, pattern, c.full_scale, scale,
+                                 {"recording": c.what, "dropped_camera_frames": gaps,
+                                  "camera": name, "boundaries_from": names[rs.reference]})
+        if not a.no_check:
+            r = quick_check(seg, layout, pattern, c.full_scale / scale)
+            n = layout.nx * layout.ny
+            say(f"rotstar-segment: {name}: board found: {r.n_valid} of {n} corners" if r.found
+                else f"rotstar-segment: {name}: no board: {r.error}")
+            with open(os.path.join(folder, "segment.json")) as f:
+                info = json.load(f)
+            info["quick_check"] = {"found": r.found, "corners": r.n_valid, "error": r.error,
+                                   "motion_px": r.motion_px}
+            with atomic_write(os.path.join(folder, "segment.json")) as f:
+                json.dump(info, f, indent=1, default=float)
+                f.write("\n")
 
 
 if __name__ == "__main__":

@@ -40,7 +40,30 @@ from ..simulate.poses import default_distance_range, random_poses
 from ..optics import TERMS, LensPSF, Seidel
 from ..simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_dataset
 from ..simulate.screen import exact_frames, png_frames, shown_light
-from .common import EXIT_CODES_HELP, EXIT_FAILED, check_output_path, fail, number_arg, run
+from ..capture.simulated import write_player_recording
+from ..display.player import DEFAULT_HOLD
+from .common import EXIT_CODES_HELP, EXIT_FAILED, HelpFormatter, check_output_path, fail, number_arg, \
+    out_line, run
+
+DESCRIPTION = """\
+Render a synthetic dataset: the rotating-star screen seen by a camera at
+random poses, exposed and quantised like a real sensor, with the ground truth
+(true camera model, poses and corner projections) next to it. Or, with
+--recording, what a camera records while player.html loops (a camera stream
+of the sequence, pose after pose), to try rotstar-segment and rotstar-capture
+--backend replay without a camera.
+"""
+
+EPILOG = """\
+examples:
+  rotstar-simulate --out seq/ --poses 24 --jobs 2
+  rotstar-simulate --rig d435 --rgb --out stereo/
+  rotstar-pattern --out pattern/
+  rotstar-simulate --recording rec.npy --pattern pattern/ --camera pinhole-small --hold 18 --poses 2
+  rotstar-capture --backend replay --device rec.npy --pattern pattern/ --hold 18 --auto --out seq/
+  rotstar-segment one-pose.npy --pattern pattern/ --out seq/pose000
+
+""" + EXIT_CODES_HELP + "\n"
 
 DISPLAY_GAMMA = 2.2  # the gamma rotstar-pattern encodes for when pattern.json records none
 
@@ -77,13 +100,11 @@ def seidel_arg(spec: str) -> Seidel:
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(
         prog="rotstar-simulate",
-        description="Render a synthetic dataset: the rotating-star screen seen by a camera at random "
-        "poses, exposed and quantised like a real sensor, with the ground truth (true camera model, "
-        "poses and corner projections) next to it.",
-        epilog=EXIT_CODES_HELP,
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=HelpFormatter,
     )
-    p.add_argument("--out", required=True, metavar="SEQ", help="dataset folder to write")
+    p.add_argument("--out", metavar="SEQ", help="dataset folder to write (needed unless --recording)")
     p.add_argument(
         "--pattern",
         metavar="DIR",
@@ -121,7 +142,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                         + "; ".join(f"{k}: {v['description']}" for k, v in RIGS.items())
                         + ". Writes the multi-camera layout (poseNNN/camera-K/) and truth-camera-K.cameramodel")
     p.add_argument("--rgb", action="store_true", help="with --rig: add the colour camera (camera 2, grayscale, 8-bit)")
-    p.add_argument("--poses", type=int, default=24, help="number of random poses")
+    p.add_argument("--poses", type=int, default=None, help="number of random poses (default 24; 1 with --recording)")
     p.add_argument("--seed", type=int, default=0, help="seed of the poses and of the noise")
     p.add_argument("--blur", type=float, default=None,
                    help="Gaussian PSF sigma in camera pixels (0: none); default 1.0 (without --seidel)")
@@ -177,7 +198,32 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "frame, or 'random:A' for offsets uniform in a disc of radius A (seeded by --seed)")
     p.add_argument("--jobs", type=int, default=1, help="render poses in this many processes (results do not depend on it)")
     p.add_argument("--force", action="store_true", help="write into a folder that already holds a dataset")
+    r = p.add_argument_group("a recording of the looping player (instead of a dataset)")
+    r.add_argument("--recording", metavar="REC.npy",
+                   help="write what a camera records while player.html loops, pose after pose (still for --loops "
+                        "loops and a bit, then moving for a second), as REC.npy + REC.json: the recording that "
+                        "rotstar-segment and rotstar-capture --backend replay read; no ground truth, no --out")
+    r.add_argument("--hold", type=number_arg(int, 1), default=DEFAULT_HOLD,
+                   help="the player's hold, refreshes per frame (give rotstar-capture the same --hold)")
+    r.add_argument("--refresh", type=number_arg(float, 0, lo_open=True), default=60.0, help="screen refresh rate, Hz")
+    r.add_argument("--fps", type=number_arg(float, 0, lo_open=True), default=25.0, help="camera frame rate")
+    r.add_argument("--loops", type=number_arg(float, 0, lo_open=True), default=2.2,
+                   help="loops of the player per pose that rotstar-capture records (its --loops); each pose is "
+                        "still for 1 s + this + 1 loops")
     args = p.parse_args(argv)
+    if (args.out is None) == (args.recording is None):
+        p.error("give --out SEQ (a dataset) or --recording REC.npy (a recording of the player), not both" if
+                args.out else "--out SEQ is needed (or --recording REC.npy)")
+    if args.recording and (args.rig or args.display_offsets or args.screen_png or args.force or args.shot or args.black
+                           or args.value_bits):
+        p.error("--recording takes a single camera and the sensor's gain, noise and bits; drop --rig, "
+                "--display-offsets, --screen-png, --shot, --black, --value-bits and --force")
+    if args.recording and not args.pattern:
+        p.error("--recording needs --pattern DIR: the pattern folder player.html shows (rotstar-pattern --out DIR)")
+    if args.recording and not args.recording.endswith(".npy"):
+        p.error(f"--recording {args.recording}: the file name must end in .npy")
+    if args.poses is None:
+        args.poses = 1 if args.recording else 24
     if args.poses < 1:
         p.error("--poses must be at least 1")
     if args.supersample < 1:
@@ -286,10 +332,34 @@ def _rig(args, layout, frames, cams, distance, say, gammas: dict) -> int:
                                            "max_tilt_deg": args.max_tilt, "margin_px": args.margin, **gammas},
                       seidel=args.seidel)
     thin = [k for k in range(len(cams)) if seen[:, k].sum() < 2]
-    print(args.out)
+    out_line(args.out)
     if thin:
         say(f"warning: camera-{thin[0]} sees fewer than 2 poses; mrcal needs at least 2 per camera (more --poses)")
         return EXIT_FAILED
+    return 0
+
+
+def _recording(args, layout, model, camera: str, encoded: float, say) -> int:
+    """--recording: the camera filming the looping player at --poses random poses, as REC.npy + REC.json"""
+    try:
+        distance = tuple(args.distance) if args.distance else default_distance_range(model, layout)
+        rts = random_poses(model, layout, args.poses, np.random.default_rng([0, args.seed]), distance=distance,
+                           max_tilt_deg=args.max_tilt, margin_px=args.margin)
+        W, H = (int(v) for v in model.imagersize())
+        say(f"a recording of the player (hold {args.hold} at {args.refresh:g} Hz) by camera {camera} {W}x{H} at "
+            f"{args.fps:g} fps, {args.poses} pose(s)")
+        n = write_player_recording(
+            args.recording, layout, model, rts, hold=args.hold, refresh_hz=args.refresh, fps=args.fps,
+            loops=args.loops, gain=args.gain, noise=args.noise, bits=args.bits, room=args.room,
+            supersample=args.supersample, psf=args.blur if args.seidel is None else LensPSF(args.seidel, (W, H)),
+            frames=screen_frames(args, layout, encoded), seed=args.seed, progress=say)
+    except (DatasetError, ValueError, RuntimeError) as e:
+        fail(f"error: {e}", EXIT_FAILED)
+    except OSError as e:  # a full disk: the file is removed
+        fail(str(e) if not e.filename else f"{e.filename}: {e.strerror}", EXIT_FAILED)
+    say(f"{args.recording}: {n} frames; next: rotstar-capture --backend replay --device {args.recording} "
+        f"--pattern {args.pattern} --hold {args.hold} --loops {args.loops:g} --auto --out seq/")
+    out_line(args.recording)
     return 0
 
 
@@ -313,6 +383,9 @@ def _main(argv=None) -> int:
             model, camera = cams[0].model, f"{args.rig} rig camera 0"
         else:
             model, camera = load_camera(args.camera)
+        if args.recording:
+            check_output_path(args.recording)
+            return _recording(args, layout, model, camera, encoded, say)
         check_output_path(args.out, folder=True)
         if args.pattern and os.path.realpath(args.out) == os.path.realpath(
                 args.pattern if os.path.isdir(args.pattern) else os.path.dirname(args.pattern) or "."):
@@ -376,7 +449,7 @@ def _main(argv=None) -> int:
         )
     except (DatasetError, ValueError, RuntimeError, OSError) as e:
         fail(f"error: {e}", EXIT_FAILED)
-    print(args.out)
+    out_line(args.out)
     return 0
 
 
