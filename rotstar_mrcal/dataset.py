@@ -169,13 +169,68 @@ def _quiet_stderr():
         os.close(saved)
 
 
+MAX_FRAME_PIXELS = 50_000_000  # a frame larger than this (50 Mpx) is a corrupt or foreign file, not a camera's
+
+
+def header_size(fn: str) -> tuple[int, int] | None:
+    """(width, height) an image's header claims, without decoding it; None when the header is not readable
+
+    PNG's IHDR is read directly; the other formats the reader accepts (PGM,
+    TIFF, JPEG, BMP) through Pillow, which reads only their headers here.
+    DatasetError when the header claims more pixels than Pillow will open.
+
+    >>> import tempfile
+    >>> fn = os.path.join(tempfile.mkdtemp(), "a.png"); _ = cv2.imwrite(fn, np.zeros((8, 12), np.uint8))
+    >>> header_size(fn)
+    (12, 8)
+    """
+    try:
+        with open(fn, "rb") as f:
+            head = f.read(24)
+    except OSError:
+        return None
+    if len(head) >= 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    from PIL import Image  # matplotlib's dependency
+
+    try:
+        with Image.open(fn) as im:
+            return im.size
+    except Image.DecompressionBombError:
+        raise DatasetError(f"{fn}: its header claims an absurd frame size (more than "
+                           f"{MAX_FRAME_PIXELS // 1_000_000} Mpx): a corrupt or foreign file") from None
+    except (OSError, ValueError, SyntaxError):
+        return None
+
+
+def check_frame_size(fn: str, size: tuple[int, int] | None) -> None:
+    """DatasetError unless the (width, height) an image's header claims is a plausible frame's
+
+    >>> check_frame_size("a.png", (1280, 800))
+    >>> check_frame_size("a.png", (60000, 60000))
+    Traceback (most recent call last):
+    ...
+    rotstar_mrcal.dataset.DatasetError: a.png: its header claims a 60000x60000 frame (3600 Mpx, more than 50): a corrupt or foreign file
+    """
+    if size is None:
+        return
+    w, h = size
+    if w < 1 or h < 1 or w * h > MAX_FRAME_PIXELS:
+        raise DatasetError(f"{fn}: its header claims a {w}x{h} frame ({w * h / 1e6:.0f} Mpx, more than "
+                           f"{MAX_FRAME_PIXELS // 1_000_000}): a corrupt or foreign file")
+
+
 def read_image(fn: str) -> tuple[np.ndarray, float]:
-    """A grayscale 8- or 16-bit PNG as float32, and its full scale"""
+    """A grayscale 8- or 16-bit PNG as float32, and its full scale; its size is checked from its header first"""
     if not os.path.exists(fn):
         raise DatasetError(f"{fn}: missing frame")
     _check_regular(fn)
-    with _quiet_stderr():  # libpng prints its own error lines; ours is the one that counts
-        img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+    check_frame_size(fn, header_size(fn))
+    try:
+        with _quiet_stderr():  # libpng prints its own error lines; ours is the one that counts
+            img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        img = None
     if img is None:
         raise DatasetError(f"{fn}: not a readable image (corrupt or not PNG)")
     if img.ndim == 3:
@@ -202,6 +257,7 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         raise DatasetError(f"{os.path.join(folder, extra[0])}: extra frame not in pattern.json")
     rot_files = [os.path.join(folder, f["file"]) for f in frames if f["kind"] == "rotstar"]
     id_files = [os.path.join(folder, f["file"]) for f in frames if f["kind"] == "identity"]
+    check_sizes(rot_files + id_files)
     imgs, scales = [], set()
     for fn in rot_files + id_files:
         img, fs = read_image(fn)
@@ -243,6 +299,35 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         phase=phase,
         star=star,
     )
+
+
+def check_sizes(files: list[str]) -> None:
+    """DatasetError, naming the file, when a frame's header claims an absurd size or one the others do not
+
+    Read from the headers before any frame is decoded: a corrupt header
+    never reaches the decoder, and the odd frame is named whatever it holds.
+
+    >>> import tempfile
+    >>> d = tempfile.mkdtemp(); fns = [os.path.join(d, f"{k}.png") for k in range(3)]
+    >>> for fn, w in zip(fns, (12, 12, 10)):
+    ...     _ = cv2.imwrite(fn, np.zeros((8, w), np.uint8))
+    >>> check_sizes(fns[:2])
+    >>> check_sizes(fns)
+    Traceback (most recent call last):
+    ...
+    rotstar_mrcal.dataset.DatasetError: ...2.png: frame size 10x8 differs from the others (12x8)
+    """
+    sizes = {}
+    for fn in files:
+        if os.path.isfile(fn):
+            sizes[fn] = header_size(fn)
+            check_frame_size(fn, sizes[fn])
+    known = [s for s in sizes.values() if s is not None]
+    if len(set(known)) > 1:
+        common = max(set(known), key=known.count)  # the size most frames have
+        odd = next(fn for fn, s in sizes.items() if s is not None and s != common)
+        raise DatasetError(f"{odd}: frame size {sizes[odd][0]}x{sizes[odd][1]} differs from the others "
+                           f"({common[0]}x{common[1]})")
 
 
 def _optional(folder: str, frames: list[dict], kind: str, shape) -> np.ndarray | None:
@@ -345,15 +430,14 @@ def image_size(fn: str) -> tuple[int, int] | None:
     >>> image_size(fn)
     (12, 8)
     """
-    try:
-        with open(fn, "rb") as f:
-            head = f.read(24)
-    except OSError:
-        return None
-    if len(head) >= 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
-        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    size = header_size(fn)
+    if size is not None:
+        return size
     with _quiet_stderr():
-        img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+        try:
+            img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+        except cv2.error:
+            img = None
     return None if img is None else (img.shape[1], img.shape[0])
 
 

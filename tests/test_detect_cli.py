@@ -15,6 +15,7 @@ import os
 import re
 import shlex
 import shutil
+import zlib
 
 import cv2
 import mrcal
@@ -42,6 +43,7 @@ EXPECT = {
     "truncated_png": r"truncated_png/rotstar_05\.png: not a readable image",
     "mixed_depth": r"mixed_depth: frames mix 8- and 16-bit",
     "colour_frame": r"colour_frame/rotstar_01\.png: colour image",
+    "huge_header": r"huge_header/rotstar_03\.png: its header claims a 60000x60000 frame \(3600 Mpx",
     "dark": r"all dark",
     "saturated": r"saturated",
     "out_of_view": None,  # part of the board off the image: the identity frames label the corners in view
@@ -59,6 +61,17 @@ SHUFFLE = [5, 2, 7, 0, 3, 1, 6, 4]  # frame 0 shows the pattern at angle 5 pi / 
 def copy_pose(src_seq, pose, dst_seq, name):
     shutil.copytree(os.path.join(src_seq, pose), os.path.join(dst_seq, name))
     return os.path.join(dst_seq, name)
+
+
+def huge_png(path, width=60000, height=60000):
+    """A valid PNG signature and IHDR claiming width x height at 16 bits, with a tiny IDAT (a corrupt header)"""
+    def chunk(kind, data):
+        return len(data).to_bytes(4, "big") + kind + data + zlib.crc32(kind + data).to_bytes(4, "big")
+
+    ihdr = width.to_bytes(4, "big") + height.to_bytes(4, "big") + bytes([16, 0, 0, 0, 0])
+    with open(path, "wb") as fh:
+        fh.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 64))
+                 + chunk(b"IEND", b""))
 
 
 def rewrite(folder, fn, f):
@@ -121,6 +134,7 @@ def bad_seq(d435_seq, tmp_path_factory):
         data = fh.read()
     with open(path, "wb") as fh:
         fh.write(data[: len(data) // 2])
+    huge_png(os.path.join(copy("pose004", "huge_header"), "rotstar_03.png"))
     rewrite(copy("pose005", "mixed_depth"), "rotstar_06.png", lambda img: (img >> 8).astype(np.uint8))
     rewrite(copy("pose005", "colour_frame"), "rotstar_01.png",
             lambda img: np.dstack((img, img, img // 2)))
