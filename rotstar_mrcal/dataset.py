@@ -465,6 +465,8 @@ def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
     in a pose is that camera not seeing the board there, not an error. Errors:
     a pose folder not named poseNNN or holding no camera folder, the camera
     folders of one pose holding different frames (differing frame counts),
+    a camera folder whose number has leading zeros (camera-01: mrcal's
+    file names and every tool name it camera-1),
     one camera's images differing in size between poses, a camera with no
     pose at all.
     """
@@ -481,6 +483,10 @@ def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
         folder = os.path.join(seq, e)
         cams = {camera_index(c): c for c in os.listdir(folder)
                 if camera_index(c) is not None and os.path.isdir(os.path.join(folder, c))}
+        odd = sorted(c for c in os.listdir(folder) if camera_index(c) is not None and c != camera_folder(camera_index(c)))
+        if odd:
+            raise DatasetError(f"{os.path.join(folder, odd[0])}: a camera folder is named {CAMERA_PREFIX}K without "
+                               f"leading zeros; rename it {camera_folder(camera_index(odd[0]))}")
         if not cams:
             if names & set(os.listdir(folder)):
                 raise DatasetError(f"{folder}: frames directly in a pose folder of a multi-camera dataset; "

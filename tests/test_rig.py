@@ -195,6 +195,19 @@ def test_layout_errors(tmp_path):
         dataset.read_rig(seq)
 
 
+def test_camera_folder_with_leading_zeros(tmp_path, capsys):
+    """camera-01 is not read as camera 1 and then opened as camera-1: refused in one line naming it"""
+    seq = tiny_rig(tmp_path)
+    os.rename(os.path.join(seq, "pose001", "camera-1"), os.path.join(seq, "pose001", "camera-01"))
+    with pytest.raises(dataset.DatasetError, match=r"pose001/camera-01: a camera folder is named camera-K without "
+                                                   r"leading zeros; rename it camera-1$"):
+        dataset.read_rig(seq)
+    assert detect_cli.main([seq, "-o", str(tmp_path / "c.vnl")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "camera-01: a camera folder is named camera-K" in err[0]
+    assert not os.path.exists(tmp_path / "c.vnl")
+
+
 def test_turned_board_dropped_and_too_few_boards(rig_seq, detected, tmp_path, capsys):
     """A pose whose camera-1 images are turned by 180 degrees (not how this rig sees a board) is dropped from
     every camera; a camera left with one board gets no command (mrcal needs 2 per camera): exit 1"""
