@@ -50,6 +50,7 @@ EXPECT = {
     "moved_drift": r"camera moved",
     "moved_jitter": r"camera moved",
     "reversed_order": r"frames out of order: frame 0 shows the angle of frame [17]",
+    "mirrored": r"board seen mirrored \(the image flipped, or the screen seen through a mirror\)",
     "shuffled_order": r"frames out of order",
 }
 SHUFFLE = [5, 2, 7, 0, 3, 1, 6, 4]  # frame 0 shows the pattern at angle 5 pi / 16
@@ -149,6 +150,9 @@ def bad_seq(d435_seq, tmp_path_factory):
         os.rename(os.path.join(d, fn), os.path.join(d, f"tmp_{7 - k}"))
     for k, fn in enumerate(ROTSTAR):
         os.rename(os.path.join(d, f"tmp_{k}"), os.path.join(d, fn))
+    d = copy("pose001", "mirrored")
+    for fn in os.listdir(d):
+        rewrite(d, fn, np.fliplr)
     d = copy("pose007", "shuffled_order")
     for k, fn in enumerate(ROTSTAR):
         os.rename(os.path.join(d, ROTSTAR[SHUFFLE[k]]), os.path.join(d, f"tmp_{k}"))

@@ -1,4 +1,4 @@
-"""Identity frames at work: boards over the image edge, turned, mirrored, occluded, corrupted (issue 13)
+"""Identity frames at work: boards over the image edge, turned, mirrored (refused), occluded, corrupted (issue 13)
 
 Every reported corner must be the right corner (within a fraction of a pixel
 of the truth of its label); corners are allowed to be missing, never wrong.
@@ -69,19 +69,25 @@ def test_boards_over_the_edge_give_the_corners_in_view(hanging):
         assert "partly out of view" in detect_pose(rot, layout, 65535.0).error
 
 
-def test_mirrored_and_turned_views_are_labelled_by_their_codes(hanging, d435_seq):
+def test_turned_views_are_labelled_by_their_codes_and_mirrored_ones_refused(hanging, d435_seq):
+    """A turned view is labelled by its codes; a mirrored one (np.fliplr of every frame) is refused, with why:
+    its codes would label it, but mrcal's board pose is a rotation and cannot fit a mirrored board"""
     layout, views = hanging
     p = dataset.load_pose(d435_seq.path, "pose000", d435_seq.layout)
     cases = [(p.rotstar, p.identity, d435_seq.corners("pose000"))] + [views["top-left corner"]]
     for rot, ident, truth in cases:
         H, W = rot.shape[1:]
-        mirrored = (rot[..., ::-1], ident[..., ::-1], np.stack((W - 1 - truth[..., 0], truth[..., 1]), -1))
         turned = (rot[:, ::-1, ::-1], ident[:, ::-1, ::-1], (W - 1, H - 1) - truth)
-        for r_, i_, t_ in (mirrored, turned):
-            r = detect_pose(np.ascontiguousarray(r_), layout, 65535.0, identity=np.ascontiguousarray(i_))
-            assert r.found, r.error
-            ok = check_corners(r, t_)
-            assert ok.sum() >= 0.85 * in_view(t_, (H, W)).sum()
+        r_, i_, t_ = turned
+        r = detect_pose(np.ascontiguousarray(r_), layout, 65535.0, identity=np.ascontiguousarray(i_))
+        assert r.found, r.error
+        ok = check_corners(r, t_)
+        assert ok.sum() >= 0.85 * in_view(t_, (H, W)).sum()
+        mirrored = [np.ascontiguousarray([np.fliplr(f) for f in frames]) for frames in (rot, ident)]
+        r = detect_pose(mirrored[0], layout, 65535.0, identity=mirrored[1])
+        assert not r.found and r.error.startswith("board seen mirrored (the image flipped, or the screen seen "
+                                                  "through a mirror)"), r.error
+        assert np.all(np.isnan(r.corners))
 
 
 @pytest.fixture(scope="module")
@@ -175,3 +181,4 @@ def test_corrupted_identity_frames_never_mislabel(whole, fault):
             assert named.sum() + len(r.unplaced or []) >= missing.sum(), "every element dropped has a reason"
     else:
         assert "identit" in r.error, r.error
+
