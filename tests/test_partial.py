@@ -7,6 +7,7 @@ of the truth of its label); corners are allowed to be missing, never wrong.
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -182,3 +183,21 @@ def test_corrupted_identity_frames_never_mislabel(whole, fault):
     else:
         assert "identit" in r.error, r.error
 
+
+@pytest.mark.parametrize("fault", ["inverted", "swapped"])
+def test_inverted_or_swapped_identity_frames_are_named(whole, fault):
+    """One identity frame inverted, or two swapped (on disk or in pattern.json): the pose is refused naming the
+    frames, not as 'identities of 0 of 1 elements read' nor with most of the board silently lost"""
+    layout, rot, ident, truth = whole
+    bad = ident.copy()
+    if fault == "inverted":  # frame 4 shown in negative
+        bad[4] = ident.max(axis=0) + ident.min(axis=0) - ident[4]
+        want = r"identity frame 4 \(identity_04\.png\) inverted \(its white and black exchanged\): as recorded " \
+               r"the codes of \d+ of 12\d elements read, with it inverted 12\d"
+    else:  # frames 3 and 9 in each other's place
+        bad[[3, 9]] = ident[[9, 3]]
+        want = r"identity frames 3 and 9 \(identity_03\.png, identity_09\.png\) swapped, on disk or in pattern\.json: " \
+               r"as recorded the codes of \d+ of 12\d elements read, with the two exchanged 12\d"
+    r = detect_pose(rot, layout, 65535.0, identity=bad)
+    assert not r.found and np.all(np.isnan(r.corners))
+    assert re.match(want, r.error), r.error

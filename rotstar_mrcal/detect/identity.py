@@ -27,7 +27,9 @@ SPLIT_THRESHOLD, and the parts are read on their own. Each element's level in ea
 5 x 5 lattice of points spread over the largest square inside it, and the
 code (pattern/identity.py) reads its index from those levels or rejects it
 with a reason. Labels never come from the elements' arrangement here; that
-is checked afterwards (consistency.py).
+is checked afterwards (consistency.py). When most codes do not read because
+one identity frame is inverted or two are swapped, `misordered` says which
+(IdentityCode.misordered), and the pose is refused with that reason.
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ class Identities:
     inscribed: np.ndarray  # (N,) half-side of the largest axis-aligned square about the centroid
     index: np.ndarray  # (N,) element index j * nx + i, -1 where not read
     reason: np.ndarray  # (N,) '' or why the code was not read
+    misordered: tuple = ()  # IdentityCode.misordered of the elements' levels: a frame inverted, two swapped
 
     def labels(self, nx: int) -> np.ndarray:
         """(N, 2) (i, j) of every element (-1, -1 where not read)"""
@@ -68,7 +71,7 @@ class Identities:
         keep = np.ones(len(self.index), bool)
         keep[drop] = False
         arrays = {f.name: np.concatenate((getattr(self, f.name)[keep], getattr(other, f.name)))
-                  for f in dataclasses.fields(self) if f.name != "contours"}
+                  for f in dataclasses.fields(self) if f.name not in ("contours", "misordered")}
         return Identities([c for c, k in zip(self.contours, keep) if k] + other.contours, **arrays)
 
 
@@ -128,6 +131,11 @@ def read_identities(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCod
     imap = identity_map(rotstar, identity)
     noise = pixel_noise(identity) / SAMPLES  # of the mean of SAMPLES^2 pixels
     ids = _read((imap > MAP_THRESHOLD).astype(np.uint8), identity, code, noise)
+    if len(ids.index):  # most codes unread: a frame inverted, or two swapped?
+        levels = element_levels(identity, ids.centroids, np.maximum(ids.inscribed, 0.5))
+        ids.misordered = code.misordered(levels, noise)
+        if ids.misordered:
+            return ids
     # regions whose code reads as neither: two elements joined across a band closed by blur or
     # saturation? The band is darker in the map than the elements: split them at SPLIT_THRESHOLD
     failed = np.flatnonzero(ids.index < 0)

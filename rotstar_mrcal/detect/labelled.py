@@ -92,10 +92,31 @@ def _parity_check(frame0, labels, rough, layout: Layout) -> np.ndarray:
     return np.isfinite(s) & (np.abs(s) > PARITY_MIN) & (np.sign(s) != expect)
 
 
+def misordered_reason(fault: tuple, layout: Layout) -> str:
+    """Why a pose whose identity frames are inverted or swapped (IdentityCode.misordered) is refused, naming them
+
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> misordered_reason(("swapped", 3, 7, 60, 124, 126), make_layout())[:68]
+    'identity frames 3 and 7 (identity_03.png, identity_07.png) swapped, '
+    """
+    files = [f["file"] for f in layout.frames() if f["kind"] == "identity"]
+    *what, read, fixed, n = fault
+    if what[0] == "inverted":
+        k = what[1]
+        return (f"identity frame {k} ({files[k]}) inverted (its white and black exchanged): as recorded the codes "
+                f"of {read} of {n} elements read, with it inverted {fixed}; the pose is skipped")
+    a, b = what[1:]
+    return (f"identity frames {a} and {b} ({files[a]}, {files[b]}) swapped, on disk or in pattern.json: as recorded "
+            f"the codes of {read} of {n} elements read, with the two exchanged {fixed}; the pose is skipped "
+            "(put the frames in pattern.json's order)")
+
+
 def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window: float):
     """LabelledElements from the identity frames, or a one-line reason; see the module doc"""
     H, W = frames.shape[1:]
     ids = read_identities(frames, identity, layout.identity_code)
+    if ids.misordered:
+        return misordered_reason(ids.misordered, layout)
     read = ids.index >= 0
     unplaced = list(ids.reason[~read])
     if read.sum() < 4:
