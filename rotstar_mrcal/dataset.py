@@ -35,6 +35,7 @@ import dataclasses
 import json
 import os
 import stat
+import warnings
 
 import cv2
 import numpy as np
@@ -194,8 +195,10 @@ def header_size(fn: str) -> tuple[int, int] | None:
     from PIL import Image  # matplotlib's dependency
 
     try:
-        with Image.open(fn) as im:
-            return im.size
+        with warnings.catch_warnings():  # Pillow warns of large images on stderr: check_frame_size judges
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(fn) as im:
+                return im.size
     except Image.DecompressionBombError:
         raise DatasetError(f"{fn}: its header claims an absurd frame size (more than "
                            f"{MAX_FRAME_PIXELS // 1_000_000} Mpx): a corrupt or foreign file") from None

@@ -516,3 +516,16 @@ def test_board_with_too_few_corners_for_mrcal(run_cli, tmp_path):
     _, _, paths = mrcal.compute_chessboard_corners(layout.nx, layout.ny, globs_per_camera=(os.path.join(seq, "*", FIRST),),
                                                    corners_cache_vnl=str(fn), weight_column_kind="level")
     assert len(paths) == 3  # what rotstar-detect said: mrcal uses three boards
+
+
+@pytest.mark.parametrize("size", [(60000, 60000), (9000, 9000)])
+def test_frame_size_read_from_the_pgm_header(tmp_path, size):
+    """Formats other than PNG too: a PGM whose header claims an absurd size is refused by its header, one line"""
+    from rotstar_mrcal import dataset
+
+    fn = str(tmp_path / "rotstar_00.pgm")
+    with open(fn, "wb") as fh:
+        fh.write(f"P5\n{size[0]} {size[1]}\n65535\n".encode() + bytes(100))
+    with pytest.raises(dataset.DatasetError, match=rf"^{re.escape(fn)}: its header claims an? .*(more than 50|"
+                                                   rf"{size[0]}x{size[1]}).*: a corrupt or foreign file$"):
+        dataset.read_image(fn)
