@@ -104,11 +104,11 @@ def misordered_reason(fault: tuple, layout: Layout) -> str:
     if what[0] == "inverted":
         k = what[1]
         return (f"identity frame {k} ({files[k]}) inverted (its white and black exchanged): as recorded the codes "
-                f"of {read} of {n} elements read, with it inverted {fixed}; the pose is skipped")
+                f"of {read} of {n} elements read, with it inverted {fixed}")
     a, b = what[1:]
     return (f"identity frames {a} and {b} ({files[a]}, {files[b]}) swapped, on disk or in pattern.json: as recorded "
-            f"the codes of {read} of {n} elements read, with the two exchanged {fixed}; the pose is skipped "
-            "(put the frames in pattern.json's order)")
+            f"the codes of {read} of {n} elements read, with the two exchanged {fixed} (put the frames in "
+            "pattern.json's order)")
 
 
 def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window: float):
