@@ -184,14 +184,15 @@ def test_corrupted_identity_frames_never_mislabel(whole, fault):
         assert "identit" in r.error, r.error
 
 
-@pytest.mark.parametrize("fault", ["inverted", "swapped"])
+@pytest.mark.parametrize("fault", ["inverted", "inverted-file", "swapped"])
 def test_inverted_or_swapped_identity_frames_are_named(whole, fault):
-    """One identity frame inverted, or two swapped (on disk or in pattern.json): the pose is refused naming the
-    frames, not as 'identities of 0 of 1 elements read' nor with most of the board silently lost"""
+    """One identity frame inverted (shown in negative, or its file inverted: the surround white too), or two
+    swapped (on disk or in pattern.json): the pose is refused naming the frames, not as 'identities of 0 of 1
+    elements read' nor with most of the board silently lost"""
     layout, rot, ident, truth = whole
     bad = ident.copy()
-    if fault == "inverted":  # frame 4 shown in negative
-        bad[4] = ident.max(axis=0) + ident.min(axis=0) - ident[4]
+    if fault.startswith("inverted"):  # frame 4 shown in negative, or written as an inverted 16-bit image
+        bad[4] = ident.max(axis=0) + ident.min(axis=0) - ident[4] if fault == "inverted" else 65535 - ident[4]
         want = r"identity frame 4 \(identity_04\.png\) inverted \(its white and black exchanged\): as recorded " \
                r"the codes of \d+ of 12\d elements read, with it inverted 12\d"
     else:  # frames 3 and 9 in each other's place

@@ -39,7 +39,7 @@ import dataclasses
 import cv2
 import numpy as np
 
-from ..pattern.identity import IdentityCode
+from ..pattern.identity import MISORDER_READ, IdentityCode
 from .boundaries import inscribed_square, on_border
 from .response import pixel_noise
 
@@ -123,6 +123,42 @@ def _read(mask, identity, code, noise) -> Identities:
     return Identities(cs, centroids, edge, inscribed, index, reason)
 
 
+def undo_inversion(identity: np.ndarray, k: int) -> np.ndarray:
+    """The identity frames with frame k inverted back within the other frames' range, pixel by pixel
+
+    An inverted image (full scale - value) makes the screen's surround and
+    bands, dark in every other identity frame, bright in frame k: the
+    identity map then joins everything into one region. Within the other
+    frames' per-pixel range [lo, hi], lo + hi - frame k restores an
+    element's bit and leaves what never changes at its level.
+
+    >>> f = np.array([[10.0, 10], [10, 200], [200, 10]])[:, None, :]    # pixel 1 is surround (10 throughout)
+    >>> inv = f.copy(); inv[0] = 255 - f[0]                             # frame 0 written inverted
+    >>> undo_inversion(inv, 0)[:, 0].tolist()
+    [[10.0, 10.0], [10.0, 200.0], [200.0, 10.0]]
+    """
+    others = np.delete(identity, k, axis=0)
+    lo, hi = others.min(axis=0), others.max(axis=0)
+    out = identity.copy()
+    out[k] = np.clip(lo + hi - identity[k], lo, hi)
+    return out
+
+
+def inverted_frame(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCode, read: int, noise: float) -> tuple:
+    """() or ('inverted', k, read, fixed, n) when undoing frame k's inversion (undo_inversion) reads the board
+
+    Tried when the frames as recorded read fewer than 4 elements (no board):
+    fixed of the n elements then found read, at least MISORDER_READ of them.
+    """
+    for k in range(len(identity)):
+        fixed = undo_inversion(identity, k)
+        ids = _read((identity_map(rotstar, fixed) > MAP_THRESHOLD).astype(np.uint8), fixed, code, noise)
+        n, ok = len(ids.index), int(np.sum(ids.index >= 0))
+        if ok >= 4 and ok >= MISORDER_READ * n:
+            return ("inverted", k, read, ok, n)
+    return ()
+
+
 def read_identities(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCode) -> Identities:
     """Find the elements in the identity frames and read their codes; see the module doc"""
     identity = np.asarray(identity, np.float32)
@@ -134,6 +170,10 @@ def read_identities(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCod
     if len(ids.index):  # most codes unread: a frame inverted, or two swapped?
         levels = element_levels(identity, ids.centroids, np.maximum(ids.inscribed, 0.5))
         ids.misordered = code.misordered(levels, noise)
+        if ids.misordered:
+            return ids
+    if np.sum(ids.index >= 0) < 4:  # no board: a frame inverted as a whole image (its surround white too)?
+        ids.misordered = inverted_frame(rotstar, identity, code, int(np.sum(ids.index >= 0)), noise)
         if ids.misordered:
             return ids
     # regions whose code reads as neither: two elements joined across a band closed by blur or
