@@ -534,7 +534,11 @@ def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
         seen = {}
         for name in poses[k]:
             fn = os.path.join(seq, name, first)
-            s = image_size(fn)
+            try:
+                s = image_size(fn)
+                check_frame_size(fn, s)
+            except DatasetError:  # an absurd header: not the camera's size; load_pose skips that pose, naming it
+                s = None
             if s is not None:
                 seen.setdefault(s, fn)
         if len(seen) > 1:

@@ -15,14 +15,13 @@ import os
 import re
 import shlex
 import shutil
-import zlib
 
 import cv2
 import mrcal
 import numpy as np
 import pytest
 
-from conftest import D435_SETTINGS, ROLES
+from conftest import D435_SETTINGS, ROLES, huge_png
 from rotstar_mrcal.simulate import look_at_pose, write_dataset
 from rotstar_mrcal.vnl import read_corners
 
@@ -62,17 +61,6 @@ SHUFFLE = [5, 2, 7, 0, 3, 1, 6, 4]  # frame 0 shows the pattern at angle 5 pi / 
 def copy_pose(src_seq, pose, dst_seq, name):
     shutil.copytree(os.path.join(src_seq, pose), os.path.join(dst_seq, name))
     return os.path.join(dst_seq, name)
-
-
-def huge_png(path, width=60000, height=60000):
-    """A valid PNG signature and IHDR claiming width x height at 16 bits, with a tiny IDAT (a corrupt header)"""
-    def chunk(kind, data):
-        return len(data).to_bytes(4, "big") + kind + data + zlib.crc32(kind + data).to_bytes(4, "big")
-
-    ihdr = width.to_bytes(4, "big") + height.to_bytes(4, "big") + bytes([16, 0, 0, 0, 0])
-    with open(path, "wb") as fh:
-        fh.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 64))
-                 + chunk(b"IEND", b""))
 
 
 def rewrite(folder, fn, f):
