@@ -35,6 +35,7 @@ import dataclasses
 import json
 import os
 import stat
+import warnings
 
 import cv2
 import numpy as np
@@ -169,13 +170,70 @@ def _quiet_stderr():
         os.close(saved)
 
 
+MAX_FRAME_PIXELS = 50_000_000  # a frame larger than this (50 Mpx) is a corrupt or foreign file, not a camera's
+
+
+def header_size(fn: str) -> tuple[int, int] | None:
+    """(width, height) an image's header claims, without decoding it; None when the header is not readable
+
+    PNG's IHDR is read directly; the other formats the reader accepts (PGM,
+    TIFF, JPEG, BMP) through Pillow, which reads only their headers here.
+    DatasetError when the header claims more pixels than Pillow will open.
+
+    >>> import tempfile
+    >>> fn = os.path.join(tempfile.mkdtemp(), "a.png"); _ = cv2.imwrite(fn, np.zeros((8, 12), np.uint8))
+    >>> header_size(fn)
+    (12, 8)
+    """
+    try:
+        with open(fn, "rb") as f:
+            head = f.read(24)
+    except OSError:
+        return None
+    if len(head) >= 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    from PIL import Image  # matplotlib's dependency
+
+    try:
+        with warnings.catch_warnings():  # Pillow warns of large images on stderr: check_frame_size judges
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(fn) as im:
+                return im.size
+    except Image.DecompressionBombError:
+        raise DatasetError(f"{fn}: its header claims an absurd frame size (more than "
+                           f"{MAX_FRAME_PIXELS // 1_000_000} Mpx): a corrupt or foreign file") from None
+    except (OSError, ValueError, SyntaxError):
+        return None
+
+
+def check_frame_size(fn: str, size: tuple[int, int] | None) -> None:
+    """DatasetError unless the (width, height) an image's header claims is a plausible frame's
+
+    >>> check_frame_size("a.png", (1280, 800))
+    >>> check_frame_size("a.png", (60000, 60000))
+    Traceback (most recent call last):
+    ...
+    rotstar_mrcal.dataset.DatasetError: a.png: its header claims a 60000x60000 frame (3600 Mpx, more than 50): a corrupt or foreign file
+    """
+    if size is None:
+        return
+    w, h = size
+    if w < 1 or h < 1 or w * h > MAX_FRAME_PIXELS:
+        raise DatasetError(f"{fn}: its header claims a {w}x{h} frame ({w * h / 1e6:.0f} Mpx, more than "
+                           f"{MAX_FRAME_PIXELS // 1_000_000}): a corrupt or foreign file")
+
+
 def read_image(fn: str) -> tuple[np.ndarray, float]:
-    """A grayscale 8- or 16-bit PNG as float32, and its full scale"""
+    """A grayscale 8- or 16-bit PNG as float32, and its full scale; its size is checked from its header first"""
     if not os.path.exists(fn):
         raise DatasetError(f"{fn}: missing frame")
     _check_regular(fn)
-    with _quiet_stderr():  # libpng prints its own error lines; ours is the one that counts
-        img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+    check_frame_size(fn, header_size(fn))
+    try:
+        with _quiet_stderr():  # libpng prints its own error lines; ours is the one that counts
+            img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        img = None
     if img is None:
         raise DatasetError(f"{fn}: not a readable image (corrupt or not PNG)")
     if img.ndim == 3:
@@ -202,6 +260,7 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         raise DatasetError(f"{os.path.join(folder, extra[0])}: extra frame not in pattern.json")
     rot_files = [os.path.join(folder, f["file"]) for f in frames if f["kind"] == "rotstar"]
     id_files = [os.path.join(folder, f["file"]) for f in frames if f["kind"] == "identity"]
+    check_sizes(rot_files + id_files)
     imgs, scales = [], set()
     for fn in rot_files + id_files:
         img, fs = read_image(fn)
@@ -243,6 +302,35 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         phase=phase,
         star=star,
     )
+
+
+def check_sizes(files: list[str]) -> None:
+    """DatasetError, naming the file, when a frame's header claims an absurd size or one the others do not
+
+    Read from the headers before any frame is decoded: a corrupt header
+    never reaches the decoder, and the odd frame is named whatever it holds.
+
+    >>> import tempfile
+    >>> d = tempfile.mkdtemp(); fns = [os.path.join(d, f"{k}.png") for k in range(3)]
+    >>> for fn, w in zip(fns, (12, 12, 10)):
+    ...     _ = cv2.imwrite(fn, np.zeros((8, w), np.uint8))
+    >>> check_sizes(fns[:2])
+    >>> check_sizes(fns)
+    Traceback (most recent call last):
+    ...
+    rotstar_mrcal.dataset.DatasetError: ...2.png: frame size 10x8 differs from the others (12x8)
+    """
+    sizes = {}
+    for fn in files:
+        if os.path.isfile(fn):
+            sizes[fn] = header_size(fn)
+            check_frame_size(fn, sizes[fn])
+    known = [s for s in sizes.values() if s is not None]
+    if len(set(known)) > 1:
+        common = max(set(known), key=known.count)  # the size most frames have
+        odd = next(fn for fn, s in sizes.items() if s is not None and s != common)
+        raise DatasetError(f"{odd}: frame size {sizes[odd][0]}x{sizes[odd][1]} differs from the others "
+                           f"({common[0]}x{common[1]})")
 
 
 def _optional(folder: str, frames: list[dict], kind: str, shape) -> np.ndarray | None:
@@ -362,15 +450,14 @@ def image_size(fn: str) -> tuple[int, int] | None:
     >>> image_size(fn)
     (12, 8)
     """
-    try:
-        with open(fn, "rb") as f:
-            head = f.read(24)
-    except OSError:
-        return None
-    if len(head) >= 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
-        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    size = header_size(fn)
+    if size is not None:
+        return size
     with _quiet_stderr():
-        img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+        try:
+            img = cv2.imread(fn, cv2.IMREAD_UNCHANGED)
+        except cv2.error:
+            img = None
     return None if img is None else (img.shape[1], img.shape[0])
 
 
@@ -398,6 +485,8 @@ def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
     in a pose is that camera not seeing the board there, not an error. Errors:
     a pose folder not named poseNNN or holding no camera folder, the camera
     folders of one pose holding different frames (differing frame counts),
+    a camera folder whose number has leading zeros (camera-01: mrcal's
+    file names and every tool name it camera-1),
     one camera's images differing in size between poses, a camera with no
     pose at all.
     """
@@ -414,6 +503,10 @@ def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
         folder = os.path.join(seq, e)
         cams = {camera_index(c): c for c in os.listdir(folder)
                 if camera_index(c) is not None and os.path.isdir(os.path.join(folder, c))}
+        odd = sorted(c for c in os.listdir(folder) if camera_index(c) is not None and c != camera_folder(camera_index(c)))
+        if odd:
+            raise DatasetError(f"{os.path.join(folder, odd[0])}: a camera folder is named {CAMERA_PREFIX}K without "
+                               f"leading zeros; rename it {camera_folder(camera_index(odd[0]))}")
         if not cams:
             if names & set(os.listdir(folder)):
                 raise DatasetError(f"{folder}: frames directly in a pose folder of a multi-camera dataset; "
@@ -458,7 +551,11 @@ def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
         seen = {}
         for name in poses[k]:
             fn = os.path.join(seq, name, first)
-            s = image_size(fn)
+            try:
+                s = image_size(fn)
+                check_frame_size(fn, s)
+            except DatasetError:  # an absurd header: not the camera's size; load_pose skips that pose, naming it
+                s = None
             if s is not None:
                 seen.setdefault(s, fn)
         if len(seen) > 1:

@@ -24,6 +24,7 @@ import math
 import os
 import subprocess
 import sys
+import zlib
 
 import numpy as np
 import pytest
@@ -94,3 +95,14 @@ def run_cli():
                               cwd=cwd, env=cli_env(), timeout=timeout)
 
     return run
+
+
+def huge_png(path, width=60000, height=60000):
+    """A valid PNG signature and IHDR claiming width x height at 16 bits, with a tiny IDAT (a corrupt header)"""
+    def chunk(kind, data):
+        return len(data).to_bytes(4, "big") + kind + data + zlib.crc32(kind + data).to_bytes(4, "big")
+
+    ihdr = width.to_bytes(4, "big") + height.to_bytes(4, "big") + bytes([16, 0, 0, 0, 0])
+    with open(path, "wb") as fh:
+        fh.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 64))
+                 + chunk(b"IEND", b""))

@@ -21,7 +21,7 @@ import mrcal
 import numpy as np
 import pytest
 
-from conftest import D435_SETTINGS, ROLES
+from conftest import D435_SETTINGS, ROLES, huge_png
 from rotstar_mrcal.simulate import look_at_pose, write_dataset
 from rotstar_mrcal.vnl import read_corners
 
@@ -42,12 +42,14 @@ EXPECT = {
     "truncated_png": r"truncated_png/rotstar_05\.png: not a readable image",
     "mixed_depth": r"mixed_depth: frames mix 8- and 16-bit",
     "colour_frame": r"colour_frame/rotstar_01\.png: colour image",
+    "huge_header": r"huge_header/rotstar_03\.png: its header claims a 60000x60000 frame \(3600 Mpx",
     "dark": r"all dark",
     "saturated": r"saturated",
     "out_of_view": None,  # part of the board off the image: the identity frames label the corners in view
     "moved_drift": r"camera moved",
     "moved_jitter": r"camera moved",
     "reversed_order": r"frames out of order: frame 0 shows the angle of frame [17]",
+    "mirrored": r"board seen mirrored \(the image flipped, or the screen seen through a mirror\)",
     "shuffled_order": r"frames out of order",
 }
 SHUFFLE = [5, 2, 7, 0, 3, 1, 6, 4]  # frame 0 shows the pattern at angle 5 pi / 16
@@ -121,6 +123,7 @@ def bad_seq(d435_seq, tmp_path_factory):
         data = fh.read()
     with open(path, "wb") as fh:
         fh.write(data[: len(data) // 2])
+    huge_png(os.path.join(copy("pose004", "huge_header"), "rotstar_03.png"))
     rewrite(copy("pose005", "mixed_depth"), "rotstar_06.png", lambda img: (img >> 8).astype(np.uint8))
     rewrite(copy("pose005", "colour_frame"), "rotstar_01.png",
             lambda img: np.dstack((img, img, img // 2)))
@@ -135,6 +138,9 @@ def bad_seq(d435_seq, tmp_path_factory):
         os.rename(os.path.join(d, fn), os.path.join(d, f"tmp_{7 - k}"))
     for k, fn in enumerate(ROTSTAR):
         os.rename(os.path.join(d, f"tmp_{k}"), os.path.join(d, fn))
+    d = copy("pose001", "mirrored")
+    for fn in os.listdir(d):
+        rewrite(d, fn, np.fliplr)
     d = copy("pose007", "shuffled_order")
     for k, fn in enumerate(ROTSTAR):
         os.rename(os.path.join(d, ROTSTAR[SHUFFLE[k]]), os.path.join(d, f"tmp_{k}"))
@@ -498,3 +504,16 @@ def test_board_with_too_few_corners_for_mrcal(run_cli, tmp_path):
     _, _, paths = mrcal.compute_chessboard_corners(layout.nx, layout.ny, globs_per_camera=(os.path.join(seq, "*", FIRST),),
                                                    corners_cache_vnl=str(fn), weight_column_kind="level")
     assert len(paths) == 3  # what rotstar-detect said: mrcal uses three boards
+
+
+@pytest.mark.parametrize("size", [(60000, 60000), (9000, 9000)])
+def test_frame_size_read_from_the_pgm_header(tmp_path, size):
+    """Formats other than PNG too: a PGM whose header claims an absurd size is refused by its header, one line"""
+    from rotstar_mrcal import dataset
+
+    fn = str(tmp_path / "rotstar_00.pgm")
+    with open(fn, "wb") as fh:
+        fh.write(f"P5\n{size[0]} {size[1]}\n65535\n".encode() + bytes(100))
+    with pytest.raises(dataset.DatasetError, match=rf"^{re.escape(fn)}: its header claims an? .*(more than 50|"
+                                                   rf"{size[0]}x{size[1]}).*: a corrupt or foreign file$"):
+        dataset.read_image(fn)

@@ -1,4 +1,4 @@
-"""Identity frames at work: boards over the image edge, turned, mirrored, occluded, corrupted (issue 13)
+"""Identity frames at work: boards over the image edge, turned, mirrored (refused), occluded, corrupted (issue 13)
 
 Every reported corner must be the right corner (within a fraction of a pixel
 of the truth of its label); corners are allowed to be missing, never wrong.
@@ -7,6 +7,7 @@ of the truth of its label); corners are allowed to be missing, never wrong.
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -69,19 +70,25 @@ def test_boards_over_the_edge_give_the_corners_in_view(hanging):
         assert "partly out of view" in detect_pose(rot, layout, 65535.0).error
 
 
-def test_mirrored_and_turned_views_are_labelled_by_their_codes(hanging, d435_seq):
+def test_turned_views_are_labelled_by_their_codes_and_mirrored_ones_refused(hanging, d435_seq):
+    """A turned view is labelled by its codes; a mirrored one (np.fliplr of every frame) is refused, with why:
+    its codes would label it, but mrcal's board pose is a rotation and cannot fit a mirrored board"""
     layout, views = hanging
     p = dataset.load_pose(d435_seq.path, "pose000", d435_seq.layout)
     cases = [(p.rotstar, p.identity, d435_seq.corners("pose000"))] + [views["top-left corner"]]
     for rot, ident, truth in cases:
         H, W = rot.shape[1:]
-        mirrored = (rot[..., ::-1], ident[..., ::-1], np.stack((W - 1 - truth[..., 0], truth[..., 1]), -1))
         turned = (rot[:, ::-1, ::-1], ident[:, ::-1, ::-1], (W - 1, H - 1) - truth)
-        for r_, i_, t_ in (mirrored, turned):
-            r = detect_pose(np.ascontiguousarray(r_), layout, 65535.0, identity=np.ascontiguousarray(i_))
-            assert r.found, r.error
-            ok = check_corners(r, t_)
-            assert ok.sum() >= 0.85 * in_view(t_, (H, W)).sum()
+        r_, i_, t_ = turned
+        r = detect_pose(np.ascontiguousarray(r_), layout, 65535.0, identity=np.ascontiguousarray(i_))
+        assert r.found, r.error
+        ok = check_corners(r, t_)
+        assert ok.sum() >= 0.85 * in_view(t_, (H, W)).sum()
+        mirrored = [np.ascontiguousarray([np.fliplr(f) for f in frames]) for frames in (rot, ident)]
+        r = detect_pose(mirrored[0], layout, 65535.0, identity=mirrored[1])
+        assert not r.found and r.error.startswith("board seen mirrored (the image flipped, or the screen seen "
+                                                  "through a mirror)"), r.error
+        assert np.all(np.isnan(r.corners))
 
 
 @pytest.fixture(scope="module")
@@ -175,3 +182,23 @@ def test_corrupted_identity_frames_never_mislabel(whole, fault):
             assert named.sum() + len(r.unplaced or []) >= missing.sum(), "every element dropped has a reason"
     else:
         assert "identit" in r.error, r.error
+
+
+@pytest.mark.parametrize("fault", ["inverted", "inverted-file", "swapped"])
+def test_inverted_or_swapped_identity_frames_are_named(whole, fault):
+    """One identity frame inverted (shown in negative, or its file inverted: the surround white too), or two
+    swapped (on disk or in pattern.json): the pose is refused naming the frames, not as 'identities of 0 of 1
+    elements read' nor with most of the board silently lost"""
+    layout, rot, ident, truth = whole
+    bad = ident.copy()
+    if fault.startswith("inverted"):  # frame 4 shown in negative, or written as an inverted 16-bit image
+        bad[4] = ident.max(axis=0) + ident.min(axis=0) - ident[4] if fault == "inverted" else 65535 - ident[4]
+        want = r"identity frame 4 \(identity_04\.png\) inverted \(its white and black exchanged\): as recorded " \
+               r"the codes of \d+ of 12\d elements read, with it inverted 12\d"
+    else:  # frames 3 and 9 in each other's place
+        bad[[3, 9]] = ident[[9, 3]]
+        want = r"identity frames 3 and 9 \(identity_03\.png, identity_09\.png\) swapped, on disk or in pattern\.json: " \
+               r"as recorded the codes of \d+ of 12\d elements read, with the two exchanged 12\d"
+    r = detect_pose(rot, layout, 65535.0, identity=bad)
+    assert not r.found and np.all(np.isnan(r.corners))
+    assert re.match(want, r.error), r.error

@@ -19,6 +19,7 @@ from rotstar_mrcal.validate.calibrate import board_residuals
 import numpy as np
 import pytest
 
+from conftest import huge_png
 from rotstar_mrcal import dataset
 from rotstar_mrcal.cli import calibrate as calibrate_cli
 from rotstar_mrcal.cli import detect as detect_cli
@@ -237,6 +238,32 @@ def test_layout_errors(tmp_path):
     shutil.copy(os.path.join(seq, "pose000", "camera-0", "rotstar_00.png"), os.path.join(seq, "pose000", "x.png"))
     with pytest.raises(dataset.DatasetError, match=r"pose000/x\.png: not a camera-K folder"):
         dataset.read_rig(seq)
+
+
+def test_camera_folder_with_leading_zeros(tmp_path, capsys):
+    """camera-01 is not read as camera 1 and then opened as camera-1: refused in one line naming it"""
+    seq = tiny_rig(tmp_path)
+    os.rename(os.path.join(seq, "pose001", "camera-1"), os.path.join(seq, "pose001", "camera-01"))
+    with pytest.raises(dataset.DatasetError, match=r"pose001/camera-01: a camera folder is named camera-K without "
+                                                   r"leading zeros; rename it camera-1$"):
+        dataset.read_rig(seq)
+    assert detect_cli.main([seq, "-o", str(tmp_path / "c.vnl")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "camera-01: a camera folder is named camera-K" in err[0]
+    assert not os.path.exists(tmp_path / "c.vnl")
+
+
+def test_absurd_frame_header_skips_that_pose_only(tmp_path, capsys):
+    """A camera's first frame whose header claims 60000x60000 is not taken for the camera's size: that pose is
+    skipped naming the file, the others are read (here all dark: exit 1, no traceback)"""
+    seq = tiny_rig(tmp_path)
+    huge_png(os.path.join(seq, "pose001", "camera-1", "rotstar_00.png"))
+    assert dataset.read_rig(seq).sizes == {0: (60, 40), 1: (48, 30)}
+    assert detect_cli.main([seq, "-o", str(tmp_path / "c.vnl")]) == 1
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "pose001/camera-1" in line]
+    assert len(lines) == 1 and "pose001/camera-1/rotstar_00.png: its header claims a 60000x60000 frame" in lines[0]
+    assert "pose000/camera-1: skipped: all dark" in err and "Traceback" not in err
 
 
 def test_turned_board_dropped_and_too_few_boards(rig_seq, detected, tmp_path, capsys):

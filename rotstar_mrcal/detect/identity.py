@@ -27,7 +27,9 @@ SPLIT_THRESHOLD, and the parts are read on their own. Each element's level in ea
 5 x 5 lattice of points spread over the largest square inside it, and the
 code (pattern/identity.py) reads its index from those levels or rejects it
 with a reason. Labels never come from the elements' arrangement here; that
-is checked afterwards (consistency.py).
+is checked afterwards (consistency.py). When most codes do not read because
+one identity frame is inverted or two are swapped, `misordered` says which
+(IdentityCode.misordered), and the pose is refused with that reason.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import dataclasses
 import cv2
 import numpy as np
 
-from ..pattern.identity import IdentityCode
+from ..pattern.identity import MISORDER_READ, IdentityCode
 from .boundaries import inscribed_square, on_border
 from .response import pixel_noise
 
@@ -58,6 +60,7 @@ class Identities:
     inscribed: np.ndarray  # (N,) half-side of the largest axis-aligned square about the centroid
     index: np.ndarray  # (N,) element index j * nx + i, -1 where not read
     reason: np.ndarray  # (N,) '' or why the code was not read
+    misordered: tuple = ()  # IdentityCode.misordered of the elements' levels: a frame inverted, two swapped
 
     def labels(self, nx: int) -> np.ndarray:
         """(N, 2) (i, j) of every element (-1, -1 where not read)"""
@@ -68,7 +71,7 @@ class Identities:
         keep = np.ones(len(self.index), bool)
         keep[drop] = False
         arrays = {f.name: np.concatenate((getattr(self, f.name)[keep], getattr(other, f.name)))
-                  for f in dataclasses.fields(self) if f.name != "contours"}
+                  for f in dataclasses.fields(self) if f.name not in ("contours", "misordered")}
         return Identities([c for c, k in zip(self.contours, keep) if k] + other.contours, **arrays)
 
 
@@ -120,6 +123,42 @@ def _read(mask, identity, code, noise) -> Identities:
     return Identities(cs, centroids, edge, inscribed, index, reason)
 
 
+def undo_inversion(identity: np.ndarray, k: int) -> np.ndarray:
+    """The identity frames with frame k inverted back within the other frames' range, pixel by pixel
+
+    An inverted image (full scale - value) makes the screen's surround and
+    bands, dark in every other identity frame, bright in frame k: the
+    identity map then joins everything into one region. Within the other
+    frames' per-pixel range [lo, hi], lo + hi - frame k restores an
+    element's bit and leaves what never changes at its level.
+
+    >>> f = np.array([[10.0, 10], [10, 200], [200, 10]])[:, None, :]    # pixel 1 is surround (10 throughout)
+    >>> inv = f.copy(); inv[0] = 255 - f[0]                             # frame 0 written inverted
+    >>> undo_inversion(inv, 0)[:, 0].tolist()
+    [[10.0, 10.0], [10.0, 200.0], [200.0, 10.0]]
+    """
+    others = np.delete(identity, k, axis=0)
+    lo, hi = others.min(axis=0), others.max(axis=0)
+    out = identity.copy()
+    out[k] = np.clip(lo + hi - identity[k], lo, hi)
+    return out
+
+
+def inverted_frame(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCode, read: int, noise: float) -> tuple:
+    """() or ('inverted', k, read, fixed, n) when undoing frame k's inversion (undo_inversion) reads the board
+
+    Tried when the frames as recorded read fewer than 4 elements (no board):
+    fixed of the n elements then found read, at least MISORDER_READ of them.
+    """
+    for k in range(len(identity)):
+        fixed = undo_inversion(identity, k)
+        ids = _read((identity_map(rotstar, fixed) > MAP_THRESHOLD).astype(np.uint8), fixed, code, noise)
+        n, ok = len(ids.index), int(np.sum(ids.index >= 0))
+        if ok >= 4 and ok >= MISORDER_READ * n:
+            return ("inverted", k, read, ok, n)
+    return ()
+
+
 def read_identities(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCode) -> Identities:
     """Find the elements in the identity frames and read their codes; see the module doc"""
     identity = np.asarray(identity, np.float32)
@@ -128,6 +167,15 @@ def read_identities(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCod
     imap = identity_map(rotstar, identity)
     noise = pixel_noise(identity) / SAMPLES  # of the mean of SAMPLES^2 pixels
     ids = _read((imap > MAP_THRESHOLD).astype(np.uint8), identity, code, noise)
+    if len(ids.index):  # most codes unread: a frame inverted, or two swapped?
+        levels = element_levels(identity, ids.centroids, np.maximum(ids.inscribed, 0.5))
+        ids.misordered = code.misordered(levels, noise)
+        if ids.misordered:
+            return ids
+    if np.sum(ids.index >= 0) < 4:  # no board: a frame inverted as a whole image (its surround white too)?
+        ids.misordered = inverted_frame(rotstar, identity, code, int(np.sum(ids.index >= 0)), noise)
+        if ids.misordered:
+            return ids
     # regions whose code reads as neither: two elements joined across a band closed by blur or
     # saturation? The band is darker in the map than the elements: split them at SPLIT_THRESHOLD
     failed = np.flatnonzero(ids.index < 0)

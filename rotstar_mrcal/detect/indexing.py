@@ -30,7 +30,7 @@ SYNOPSIS
    graph cell by cell from the board's outline, with the same refusal rules.
 3. `orient` fixes the labelling among the grid's symmetries with the marker
    element (inverted checker colours in frame 0) and the checker parity, and
-   refuses a mirror image.
+   refuses a mirror image (`handedness_reason`).
 """
 
 from __future__ import annotations
@@ -416,11 +416,33 @@ def orient(labels: np.ndarray, corners: np.ndarray, frame0: np.ndarray, nx: int,
             f"{max(scores):.0%} of the checker phases; is the first rotstar frame the one at angle 0?)"
         )
     lab, grid = fits[0]
+    why = handedness_reason(grid)
+    if why:
+        raise GridError(why)
+    return lab
+
+
+def handedness_reason(grid: np.ndarray) -> str:
+    """'' or why a labelled board whose i and j axes turn the wrong way in the image is refused
+
+    A camera sees the screen's front: the turn from the i axis to the j axis
+    has the sign it has on the screen (clockwise in the image, y down). A
+    mirrored view (an image flipped, or the screen seen through a mirror)
+    turns the other way. Its labels may be right, but mrcal's board-to-camera
+    transform is a rotation: a mirrored board fits only with a reflection
+    (determinant -1), so its corners would pull the calibration off.
+
+    >>> jj, ii = np.mgrid[0:3, 0:4]
+    >>> grid = np.stack((10.0 * ii, 10.0 * jj), -1)
+    >>> handedness_reason(grid), handedness_reason(grid[:, ::-1])[:21]
+    ('', 'board seen mirrored (')
+    """
     ei, ej = axis_vectors(grid)
     cross = ei[..., 0] * ej[..., 1] - ei[..., 1] * ej[..., 0]
-    if np.nanmedian(cross) < 0:
-        raise GridError("board seen mirrored (image flipped?): its corner order would be wrong")
-    return lab
+    if not np.isfinite(cross).any() or np.nanmedian(cross) >= 0:
+        return ""
+    return ("board seen mirrored (the image flipped, or the screen seen through a mirror): the grid's i and j "
+            "axes turn the wrong way in the image, and mrcal's board pose, a rotation, cannot fit a mirrored board")
 
 
 def frame_angle(frame: np.ndarray, grid: np.ndarray, radius: float, n: int = 32) -> float:

@@ -16,7 +16,9 @@ the marker. by_identity (issue 13) labels every element in view by its
 identity code, whole or cut by the image edge, and then checks the labels:
 against the labelled neighbours (consistency.py), against the checker colours
 of frame 0 (parity and marker, as the graph path orients), and against the
-stars' angles (frames out of order, a mirrored labelling).
+stars' angles (frames out of order, a mirrored labelling). A mirrored view is
+refused (indexing.handedness_reason): its codes label it, but no board pose
+mrcal can fit (a rotation) gives a mirrored board.
 
 The refinement window of a corner is 0.65 x the half-side of the largest
 square about it inside its element, capped at `window` (pipeline.py). For an
@@ -38,7 +40,7 @@ from .boundaries import element_boundaries, inscribed_square, on_border
 from .consistency import label_consistency, predict_from_neighbours
 from .identity import read_identities
 from .indexing import (GridError, checker_phase, contact_graph, frame_angles, grid_array, grid_labels,
-                       grid_labels_grown, mirror_reason, order_reason, orient, prune_triangles)
+                       grid_labels_grown, handedness_reason, mirror_reason, order_reason, orient, prune_triangles)
 from .response import binarize, response_map
 from .rough import rough_corners
 
@@ -90,10 +92,31 @@ def _parity_check(frame0, labels, rough, layout: Layout) -> np.ndarray:
     return np.isfinite(s) & (np.abs(s) > PARITY_MIN) & (np.sign(s) != expect)
 
 
+def misordered_reason(fault: tuple, layout: Layout) -> str:
+    """Why a pose whose identity frames are inverted or swapped (IdentityCode.misordered) is refused, naming them
+
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> misordered_reason(("swapped", 3, 7, 60, 124, 126), make_layout())[:68]
+    'identity frames 3 and 7 (identity_03.png, identity_07.png) swapped, '
+    """
+    files = [f["file"] for f in layout.frames() if f["kind"] == "identity"]
+    *what, read, fixed, n = fault
+    if what[0] == "inverted":
+        k = what[1]
+        return (f"identity frame {k} ({files[k]}) inverted (its white and black exchanged): as recorded the codes "
+                f"of {read} of {n} elements read, with it inverted {fixed}")
+    a, b = what[1:]
+    return (f"identity frames {a} and {b} ({files[a]}, {files[b]}) swapped, on disk or in pattern.json: as recorded "
+            f"the codes of {read} of {n} elements read, with the two exchanged {fixed} (put the frames in "
+            "pattern.json's order)")
+
+
 def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window: float):
     """LabelledElements from the identity frames, or a one-line reason; see the module doc"""
     H, W = frames.shape[1:]
     ids = read_identities(frames, identity, layout.identity_code)
+    if ids.misordered:
+        return misordered_reason(ids.misordered, layout)
     read = ids.index >= 0
     unplaced = list(ids.reason[~read])
     if read.sum() < 4:
@@ -139,6 +162,9 @@ def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window
     # the stars' angles: frames in order, and turning from i toward j under these labels
     if keep.sum() >= 4:
         grid = grid_array(labels[keep], rough[keep], layout.nx, layout.ny)
+        why = handedness_reason(grid)  # labelled right by the codes, but no rotation fits a mirrored board
+        if why:
+            return why
         phi = frame_angles(frames, grid, layout.half_element / layout.pitch)
         why = order_reason(phi, layout.step) or mirror_reason(phi, layout.step)
         if why:

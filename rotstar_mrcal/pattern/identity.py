@@ -32,7 +32,9 @@ dropped, repeated or inverted changes the number of white frames in most
 elements, which this rejects) and the word read is one of the codewords
 (any one or two bits misread, with the weight kept, give a word outside the
 code). Nothing is corrected: a calibration loses an element rather than
-gaining a wrong label.
+gaining a wrong label. When most elements do not read, `misordered` names
+the one simple fault that explains it (a frame inverted, two frames swapped)
+so that the pose is refused with what was seen.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ import numpy as np
 
 MIN_GAP_FRACTION = 0.5  # the w-th and (w+1)-th brightest frames must differ by this part of the contrast
 MIN_CONTRAST_NOISE = 6.0  # ... and the contrast must exceed this many times the noise of an element's mean
+MISORDER_READ = 0.8  # a frame inverted or two swapped are named when undoing it reads this part of the elements
 
 
 @functools.lru_cache(maxsize=32)
@@ -146,6 +149,48 @@ class IdentityCode:
         reason[dim] = "identity unreadable: no contrast between the identity frames"
         index[reason != ""] = -1
         return index.reshape(shape), reason.reshape(shape)
+
+    def misordered(self, levels, noise: float = 0.0) -> tuple:
+        """() or what happened to the identity frames, when one simple fault explains why most codes do not read
+
+        ('inverted', k, read, fixed, n): frame k's white and black exchanged;
+        ('swapped', a, b, read, fixed, n): frames a and b in each other's place
+        (on disk or in pattern.json); read: the elements of n (those with
+        contrast) whose codes read as recorded, fixed: with the fault undone.
+        Either fault leaves most elements unreadable and none misread (an
+        inverted frame changes every word's weight; a swap changes two bits of
+        the words that differ there, and d = 4). Named only when undoing it
+        reads at least MISORDER_READ of the elements and most of those the
+        levels as recorded did not: what the detector saw, not a guess.
+
+        >>> code = IdentityCode.for_grid(nx=14, ny=9)
+        >>> levels = 20 + 180 * code.codewords.astype(float)
+        >>> code.misordered(levels)
+        ()
+        >>> code.misordered(levels[:, [0, 1, 2, 7, 4, 5, 6, 3, 8, 9, 10, 11, 12]])[:3]
+        ('swapped', 3, 7)
+        >>> inv = levels.copy(); inv[:, 5] = 220 - inv[:, 5]
+        >>> code.misordered(inv)
+        ('inverted', 5, 0, 126, 126)
+        """
+        v = np.asarray(levels, float).reshape(-1, self.nframes)
+        index, reason = self.decode(v, noise)
+        n = int(np.sum(reason != "identity unreadable: no contrast between the identity frames"))
+        read = int(np.sum(index >= 0))
+        if n < 4 or read >= MISORDER_READ * n:
+            return ()
+        hi, lo = v.max(axis=1, keepdims=True), v.min(axis=1, keepdims=True)
+        faults = [(("inverted", k), np.where(np.arange(self.nframes) == k, hi + lo - v, v))
+                  for k in range(self.nframes)]
+        for a, b in itertools.combinations(range(self.nframes), 2):
+            order = np.arange(self.nframes)
+            order[[a, b]] = b, a
+            faults.append((("swapped", a, b), v[:, order]))
+        best = max(((name, int(np.sum(self.decode(u, noise)[0] >= 0))) for name, u in faults), key=lambda f: f[1])
+        name, fixed = best
+        if fixed < MISORDER_READ * n or fixed - read < 0.5 * (n - read):
+            return ()
+        return (*name, read, fixed, n)
 
     def describe(self) -> dict:
         """pattern.json's "identity" section: the code and every element's word"""
