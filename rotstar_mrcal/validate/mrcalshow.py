@@ -59,8 +59,8 @@ import numpy as np
 from ..steps import run_tool
 from .plots import nice_max
 
-TERMINAL = 'pngcairo size 1024,640 noenhanced font ",11"'
-"""White background (mrcal's default PNG terminal is transparent)"""
+TERMINAL = 'pngcairo size 1024,640 noenhanced font ",11" background "white"'
+"""An opaque white background: mrcal's default PNG terminal (--hardcopy alone) is transparent"""
 
 
 @dataclasses.dataclass
@@ -76,6 +76,17 @@ class Figure:
     @property
     def command(self) -> str:
         return with_stdin(shlex.join(self.argv), self.stdin)
+
+
+def missing_image(model: mrcal.cameramodel, image_root: str | None = None) -> str | None:
+    """The first board image of a calibration that is not on disk (paths relative to image_root, default the
+    working directory), None if all are: mrcal-show-residuals-board-observation draws a board over its image
+    only when it can read it"""
+    paths = model.optimization_inputs().get("imagepaths")
+    for p in [] if paths is None else paths:
+        if not os.path.isfile(os.path.join(image_root or os.getcwd(), str(p))):
+            return str(p)
+    return None
 
 
 def with_stdin(command: str, stdin: str | None) -> str:
@@ -170,6 +181,7 @@ def show_commands(model_path: str, outdir: str, other: str | None = None, image_
     """
     model = mrcal.cameramodel(model_path)
     m1 = mrcal.cameramodel(other) if other else None
+    missing = missing_image(model, image_root)
     s = scales(model, m1)
     lens = model.intrinsics()[0]
     png = lambda name: os.path.join(outdir, f"{prefix}{name}.png")  # noqa: E731
@@ -182,8 +194,10 @@ def show_commands(model_path: str, outdir: str, other: str | None = None, image_
         Figure("residuals-worst", ["mrcal-show-residuals-board-observation", "--from-worst", "--vectorscale",
                                    f"{s['vectorscale']:g}", "--cbmax", f"{s['residual_cbmax']:g}",
                                    *common("residuals-worst"), os.path.abspath(model_path), "0"],
-               png("residuals-worst"), "the worst board's residuals over its image (vectors scaled "
-               f"{s['vectorscale']:g}x, colour: residual in px)", cwd=image_root),
+               png("residuals-worst"), ("the worst board's residuals over its image" if missing is None else
+                                        f"the worst board's residuals (without its image: {missing} is not on "
+                                        "disk)") + f" (vectors scaled {s['vectorscale']:g}x, colour: residual in px)",
+               cwd=image_root),
         Figure("residuals-directions", ["mrcal-show-residuals", "--directions", "--unset", "key",
                                         *common("residuals-directions"), model_path],
                png("residuals-directions"), "directions of the residuals over the imager (colour: angle): "
