@@ -172,12 +172,13 @@ def summary_bars(conditions, panels, ylabel: str):
             xs = x - 0.4 + width * (k + 0.5)
             ok = np.isfinite(y) & (y > 0)
             bars = ax.bar(xs[ok], y[ok], width, color=colour(method, k), label=method)
-            ax.bar_label(bars, labels=[f"{t:.3g}" for t in y[ok]], fontsize=6, padding=1)
+            ax.bar_label(bars, labels=[f"{t:.3g}" for t in y[ok]], fontsize=6 if m <= 3 else 5, padding=1,
+                         rotation=0 if m <= 3 else 90)  # many bars: upright numbers would overlap
             for xi in xs[~ok]:  # no number (no board, failed calibration): a cross on the axis
                 ax.plot(xi, 0, "x", color=colour(method, k), transform=ax.get_xaxis_transform(), clip_on=False)
         ax.set_xticks(x)
         ax.set_xticklabels(conditions, fontsize=8)
-        ax.margins(y=0.12)  # room for the values above the bars
+        ax.margins(y=0.12 if m <= 3 else 0.25)  # room for the values above the bars
         ax.set_ylim(bottom=0)
         ax.grid(True, axis="y", alpha=0.3)
         ax.set_title(title, fontsize=9)
