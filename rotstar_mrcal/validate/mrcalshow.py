@@ -292,7 +292,7 @@ def uncertainty_doc(model: str, img_dir: str, doc: str, halves: tuple[str, str] 
     if splined:
         figs += [f for f in show_commands(splined, img_dir) if f.name == "splined-correction"]
     draw(figs)
-    names = names or {}
+    names = {**{f.stdin: os.path.basename(f.stdin) for f in figs if f.stdin}, **(names or {})}
 
     def shown(f):
         cmd = redraw_command(f)
