@@ -1,14 +1,22 @@
-"""The drivers' steps (scripts/demo.py, scripts/stereo.py): each command printed, timed, stopped on failure
+"""The programs the tools start: never on a terminal's input; the drivers' steps (scripts/demo.py,
+scripts/stereo.py) each printed, timed, stopped on failure
 
 SYNOPSIS
 
     >>> import sys
-    >>> from rotstar_mrcal.steps import run_step, short_path
+    >>> from rotstar_mrcal.steps import run_step, run_tool, short_path
     >>> short_path("out/seq")
     'out/seq'
     >>> r = run_step([sys.executable, "-c", "print(6 * 7)"], "demo", capture_output=True, text=True)
     >>> r.stdout
     '42\\n'
+    >>> run_tool([sys.executable, "-c", "import sys; print(repr(sys.stdin.read()))"], capture_output=True,
+    ...          text=True).stdout            # a closed standard input: never waits on a terminal
+    "''\\n"
+
+run_tool is subprocess.run with the standard input closed (/dev/null)
+unless the data it needs is given (input=...) or a stdin= is: every program
+the tools start goes through it, so that none waits on a terminal.
 
 run_step prints "$ <command>" before and "  (<seconds> s)" after to stderr,
 and exits with "<who>: step failed (<program>, exit <status>)" when the
@@ -106,11 +114,18 @@ def start_clock(path: str) -> Clock:
     return _clock
 
 
+def run_tool(cmd, **kw) -> subprocess.CompletedProcess:
+    """subprocess.run(cmd, **kw) with stdin=subprocess.DEVNULL unless input= or stdin= is given"""
+    if "input" not in kw:
+        kw.setdefault("stdin", subprocess.DEVNULL)
+    return subprocess.run(cmd, **kw)
+
+
 def run_step(cmd, who: str, **kw) -> subprocess.CompletedProcess:
-    """subprocess.run(cmd, **kw), printed and timed; sys.exit naming `who` if it fails"""
+    """run_tool(cmd, **kw), printed and timed; sys.exit naming `who` if it fails"""
     log("$ " + shlex.join(cmd))
     t = time.monotonic()
-    r = subprocess.run(cmd, **kw)
+    r = run_tool(cmd, **kw)
     if r.returncode != 0:
         sys.exit(f"{who}: step failed ({cmd[0]}, exit {r.returncode})")
     dt = time.monotonic() - t

@@ -17,19 +17,19 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 from rotstar_mrcal.docblock import rewrite_block  # noqa: E402
+from rotstar_mrcal.steps import run_tool  # noqa: E402
 from rotstar_mrcal.validate.modelcheck import run_case, table  # noqa: E402
 
 
 def figures_doc(work, n, seed, docdir, jobs):
     """doc/uncertainty.md's pictures from the n-pose capture: its calibration, its two halves, its splined fit"""
-    import subprocess
 
     from rotstar_mrcal.validate.mrcalshow import uncertainty_doc
 
     name = f"d435-{n}poses-seed{seed}"
     xval = f"{name}-xval"
     print(f"$ rotstar-crossval {name} --outdir {xval}", file=sys.stderr)
-    r = subprocess.run([os.path.join(os.path.dirname(sys.executable), "rotstar-crossval"), name, "--outdir", xval,
+    r = run_tool([os.path.join(os.path.dirname(sys.executable), "rotstar-crossval"), name, "--outdir", xval,
                         "--jobs", str(jobs)], cwd=work, capture_output=True, text=True)
     if r.returncode != 0:
         raise RuntimeError(r.stderr[-2000:])

@@ -193,6 +193,14 @@ def test_mrcal_show_tools_draw_our_calibration(calibrated, tmp_path):
     assert reads_png(next(p for p in [os.path.join(d, "gnuplot") for d in gnuplot_env()["PATH"].split(os.pathsep)]
                           if os.path.exists(p)))
     assert "Couldn't read image" not in worst.log and "cannot read" not in worst.log, worst.log  # with its image
+    # the valid region with the corners the calibration used, fed on its standard input (never the terminal)
+    from rotstar_mrcal.validate.mrcalshow import redraw_command
+
+    region = next(f for f in figs if f.name == "valid-region")
+    obs = mrcal.cameramodel(model).optimization_inputs()["observations_board"]
+    xy = np.loadtxt(region.stdin)
+    assert xy.shape == (int((obs[..., 2] > 0).sum()), 2) and np.allclose(xy, obs[..., :2][obs[..., 2] > 0], atol=1e-3)
+    assert redraw_command(region).endswith(f"--points {model} < {region.stdin}") and "Empty input" not in region.log
 
 
 def test_a_board_mrcal_seeds_badly_is_solved_again(tmp_path):

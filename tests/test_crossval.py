@@ -120,6 +120,7 @@ def test_one_dataset_is_split_in_two(d435_seq, run_cli, tmp_path):
     res = json.load(open(xdir / "results.json"))
     assert res["lensmodel"] == "LENSMODEL_OPENCV8"  # rotstar-calibrate's lean model
     assert res["methods"][0]["heldout"]["A->B"]["mean_px"] < 0.03
+    assert res["label"] == "seq"  # the recording's name, not "seq vs seq"
 
 
 def test_heldout_without_outdir_writes_nothing_here(d435_seq, run_cli, tmp_path):

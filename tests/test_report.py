@@ -34,12 +34,16 @@ def test_report_builds_from_a_small_simulated_run(run_cli, tmp_path):
     json.dump(res, open(x2 / "results.json", "w"))
 
     out = tmp_path / "report"
-    r = run_cli("rotstar-report", x1, x2, "--out", out, "--title", "small run")
+    (tmp_path / "setup.md").write_text("Corners from `corner_dataset`, **simulated**.\n")
+    r = run_cli("rotstar-report", x1, x2, "--out", out, "--title", "small run", "--notes", tmp_path / "setup.md")
     assert r.returncode == 0, r.stderr
     for f in ("index.md", "index.html", "headline.md", "results.json", "summary-heldout.png", "summary-truth.png"):
         assert os.path.exists(out / f), f
     md = (out / "index.md").read_text()
     assert md.startswith("# small run") and "## exposure 1" in md and "## exposure 2" in md
+    page = (out / "index.html").read_text()
+    assert "<p>Corners from <code>corner_dataset</code>, <b>simulated</b>.</p>" in page  # Markdown marks rendered
+    assert "Redraw: <code>mrcal-show-" in page
     # simulated: the error by tilt of the test poses (also paper.md); not the paper's patterns: no claims
     assert "## By tilt of the test poses" in md and "claims" not in md + (out / "headline.md").read_text()
     assert (out / "paper.md").read_text().startswith("## By tilt of the test poses")
@@ -50,6 +54,9 @@ def test_report_builds_from_a_small_simulated_run(run_cli, tmp_path):
                  "projection-diff", "valid-intrinsics-region", "distortion-off-pinhole"):
         assert f"Redraw: `mrcal-show-{tool}" in md and f"redraw with: mrcal-show-{tool}" in r.stderr, tool
     assert "--cbmax 3 " not in md and "outliers" in md
+    # the corners' images are not on disk: the worst board is drawn without one, and the caption says so
+    assert "residuals over its image" not in md
+    assert re.search(r"without its image: \S*/pose000/rotstar_00.png is not on disk", md)
     assert os.path.getsize(out / "exposure-1" / "mrcal-sharp-uncertainty.png") > 1000
     # the headline on stdout: both methods, the sharp corners win everywhere and say so
     assert r.stdout == (out / "headline.md").read_text()

@@ -29,6 +29,7 @@ import subprocess
 import sys
 
 from ..methods import METHODS, PoseImages
+from ..steps import run_tool
 
 
 def proc_status_kb(key: str) -> int:
@@ -64,7 +65,7 @@ def program_maxrss_kb(png: str, gridn: int, args: tuple, tmp: str) -> int | None
     if not os.access(gnu_time, os.X_OK):
         return None
     fn = os.path.join(tmp, "maxrss.txt")
-    r = subprocess.run([gnu_time, "-f", "%M", "-o", fn, shutil.which("mrgingham"), "--jobs", "1", "--gridn",
+    r = run_tool([gnu_time, "-f", "%M", "-o", fn, shutil.which("mrgingham"), "--jobs", "1", "--gridn",
                         str(gridn), *args, png], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         with open(fn) as f:
@@ -89,7 +90,7 @@ def measure_memory(inputs: dict[str, PoseImages], tmp: str, log=None) -> dict:
         data = os.path.join(tmp, f"memory-{name}.pickle")
         with open(data, "wb") as f:
             pickle.dump(p, f)
-        r = subprocess.run([sys.executable, "-m", __name__, name, data], env=env, capture_output=True, text=True)
+        r = run_tool([sys.executable, "-m", __name__, name, data], env=env, capture_output=True, text=True)
         if r.returncode != 0:
             if log:
                 log(f"  memory probe of {name} failed: {r.stderr.strip()[-500:]}")

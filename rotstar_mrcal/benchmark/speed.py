@@ -60,6 +60,8 @@ import time
 
 import numpy as np
 
+from ..steps import run_tool
+
 GOAL_RATIO = 2.0  # detect (start-up included) / decode
 GOAL_VS_MRGINGHAM = 0.5  # rotstar-detect / mrgingham on the same images
 GOAL_IDENTITY = 0.10  # detect / detect without the identity frames - 1
@@ -223,7 +225,7 @@ def _run_child(argv: list[str]) -> float:
     """CPU seconds (user + system) of one child process"""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     c0 = _child_cpu()
-    r = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
+    r = run_tool(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
     if r.returncode not in (0, 1):  # 1: no pose gave a board, still a complete run
         raise RuntimeError(f"{' '.join(argv[:3])} ... failed ({r.returncode}): {r.stderr.strip()[-300:]}")
     return _child_cpu() - c0

@@ -22,11 +22,11 @@ import os
 import platform
 import re
 import shutil
-import subprocess
 
 import numpy as np
 
 from ..methods import METHODS
+from ..steps import run_tool
 from .scene import SQUARE_N
 from .scoring import MATCH_PX, START_PERTURB_PX
 
@@ -179,7 +179,7 @@ def machine() -> dict:
         pass
     mg = None
     if shutil.which("dpkg-query"):
-        r = subprocess.run(["dpkg-query", "-W", "-f", "${Version}", "mrgingham"], capture_output=True, text=True)
+        r = run_tool(["dpkg-query", "-W", "-f", "${Version}", "mrgingham"], capture_output=True, text=True)
         mg = r.stdout.strip() or None
     return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
             "opencv": cv2.__version__, "mrcal": package_version("mrcal"), "mrgingham": mg,

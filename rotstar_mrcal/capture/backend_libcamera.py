@@ -37,6 +37,7 @@ import tempfile
 
 import numpy as np
 
+from ..steps import run_tool
 from .source import CaptureError, Frame, FrameSource
 
 PIXELFORMATS = {"R8": np.uint8, "R16": np.dtype("<u2"), "GREY": np.uint8, "Y16": np.dtype("<u2")}
@@ -52,7 +53,7 @@ def _cam(cam: str) -> str:
 
 def list_cameras(cam: str = "cam") -> list[tuple[int, str]]:
     """(index, description) of every camera `cam -l` lists"""
-    r = subprocess.run([_cam(cam), "-l"], capture_output=True, text=True, timeout=30)
+    r = run_tool([_cam(cam), "-l"], capture_output=True, text=True, timeout=30)
     out = []
     for line in r.stdout.splitlines():
         m = re.match(r"\s*(\d+):\s*(.*)", line)
@@ -107,7 +108,7 @@ class LibcameraSource(FrameSource):
         with tempfile.TemporaryDirectory(prefix="rotstar-cam-") as d:
             cmd = self.command(n, d)
             try:
-                r = subprocess.run(cmd, capture_output=True, text=True, timeout=self.timeout)
+                r = run_tool(cmd, capture_output=True, text=True, timeout=self.timeout)
             except subprocess.TimeoutExpired:
                 raise CaptureError(f"libcamera: {' '.join(cmd)} did not finish in {self.timeout:g} s") from None
             files = [f for f in os.listdir(d) if f.endswith(".bin")]

@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 
 from .. import dataset
+from ..steps import run_tool
 from ..validate import calibrate as cal
 from ..validate.sources import SourceError, load_corner_set
 from .common import HelpFormatter, atomic_write, exit_status_help, make_folder, run, say
@@ -100,7 +100,7 @@ def _detect(a) -> tuple[str | None, int]:
     exe = os.path.join(os.path.dirname(sys.executable), "rotstar-detect")
     if not os.path.exists(exe):
         exe = "rotstar-detect"
-    rc = subprocess.run([exe, *dargs, "--no-hint"]).returncode
+    rc = run_tool([exe, *dargs, "--no-hint"]).returncode
     return (vnl if rc == 0 else None), rc
 
 

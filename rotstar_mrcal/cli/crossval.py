@@ -253,6 +253,9 @@ def _main(argv=None) -> int:
             va, vb = (os.path.join(a.outdir, "rotstar", f"{s}.vnl") for s in "AB")
             na, nb = split_interleaved(vnl, va, vb)
             say(f"rotstar-crossval: split {vnl} into {va} ({na} boards) and {vb} ({nb} boards), interleaved")
+            from ..validate.groups import default_label
+
+            a.label = a.label or default_label(a.inputs[0], a.inputs[0])  # the recording's name
             a.inputs = []
             sets["rotstar"] = (va, vb)
         if a.inputs:

@@ -42,10 +42,11 @@ import functools
 import glob
 import os
 import shutil
-import subprocess
 
 import cv2
 import numpy as np
+
+from ..steps import run_tool
 
 __all__ = [
     "average_frames",
@@ -541,7 +542,7 @@ def mrgingham_detect(image_paths, gridn: int, jobs: int = 1, extra_args=()) -> d
             raise FileNotFoundError(f"{p}: no such image")
     cmd = [exe, "--jobs", str(int(jobs)), "--gridn", str(int(gridn)), *map(str, extra_args)]
     cmd += [glob.escape(os.fspath(p)) for p in paths]
-    run = subprocess.run(cmd, capture_output=True, text=True)
+    run = run_tool(cmd, capture_output=True, text=True)
     if run.returncode != 0:
         raise RuntimeError(f"mrgingham failed (exit {run.returncode}): {run.stderr.strip()[-2000:]}")
     parsed = _parse_mrgingham_vnlog(run.stdout, int(gridn))

@@ -93,7 +93,6 @@ import os
 import runpy
 import shlex
 import shutil
-import subprocess
 import sys
 import tempfile
 
@@ -101,6 +100,7 @@ import mrcal
 import numpy as np
 
 from ..atomic import atomic_path
+from ..steps import run_tool
 
 LEAN_LENSMODEL = "LENSMODEL_OPENCV8"
 """The lean model: rotstar-detect's printed command, rotstar-crossval, the first fit of rotstar-calibrate"""
@@ -322,7 +322,7 @@ def run_calibration(argv, in_process: bool = False) -> mrcal.cameramodel:
     if in_process:
         code, text = _run_script(exe, argv[1:])
     else:
-        r = subprocess.run([exe] + argv[1:], capture_output=True, text=True)
+        r = run_tool([exe] + argv[1:], capture_output=True, text=True)
         code, text = r.returncode, r.stdout + r.stderr
     if code != 0:
         tail = "\n".join(text.strip().splitlines()[-6:])
@@ -333,11 +333,21 @@ def run_calibration(argv, in_process: bool = False) -> mrcal.cameramodel:
     return mrcal.cameramodel(fn)
 
 
+def _dup_or_none(fd: int) -> int | None:
+    """os.dup(fd), None if fd is not open"""
+    try:
+        return os.dup(fd)
+    except OSError:
+        return None
+
+
 def _run_script(script: str, args) -> tuple[int, str]:
     """runpy a Python script as __main__ with sys.argv = [script, *args]; (exit code, its output)
 
     Its output, Python's and the C library's (file descriptors 1 and 2), is
-    captured and returned. Global state the script changes and we know of
+    captured and returned; its standard input (sys.stdin and descriptor 0)
+    is /dev/null meanwhile, as for the programs steps.run_tool starts, so
+    that it never reads the terminal. Global state the script changes and we know of
     (sys.argv, numpy's print options: mrcal-calibrate-cameras sets
     linewidth=300) is put back.
     """
@@ -346,10 +356,12 @@ def _run_script(script: str, args) -> tuple[int, str]:
     code = 0
     sys.stdout.flush()
     sys.stderr.flush()
-    saved_fds = os.dup(1), os.dup(2)
-    with tempfile.TemporaryFile(mode="w+") as tmp:
+    saved_fds, saved_stdin = (os.dup(1), os.dup(2), _dup_or_none(0)), sys.stdin
+    with tempfile.TemporaryFile(mode="w+") as tmp, open(os.devnull) as null:
         os.dup2(tmp.fileno(), 1)
         os.dup2(tmp.fileno(), 2)
+        os.dup2(null.fileno(), 0)
+        sys.stdin = null
         try:
             with contextlib.redirect_stdout(tmp), contextlib.redirect_stderr(tmp):
                 runpy.run_path(script, run_name="__main__")
@@ -364,9 +376,14 @@ def _run_script(script: str, args) -> tuple[int, str]:
             tmp.flush()
             os.dup2(saved_fds[0], 1)
             os.dup2(saved_fds[1], 2)
+            if saved_fds[2] is None:
+                os.close(0)
+            else:
+                os.dup2(saved_fds[2], 0)
+                os.close(saved_fds[2])
             os.close(saved_fds[0])
             os.close(saved_fds[1])
-            sys.argv = saved_argv
+            sys.argv, sys.stdin = saved_argv, saved_stdin
             np.set_printoptions(**saved_print)
         tmp.seek(0)
         return code, tmp.read()

@@ -13,8 +13,10 @@ corners of the same two pose groups A and B): mrcal-calibrate-cameras on
 each group (the lean model by default, calibrate.resolve_lensmodel; the
 commands run in worker processes), then compare.evaluate on the two models
 (held-out error both ways, mrcal's cross-validation, and on simulated data
-each model against the truth), the heat maps (one colour scale for every
-set, set by the best) and the per-pose plot. A set that cannot be read or
+each model against the truth), the heat maps (each map its own colour
+scale, from zero to its data's range: plots.heatmaps) and the per-pose plot.
+The condition's label defaults to default_label's: the recording's name
+when A and B are the two halves of one, else "A vs B". A set that cannot be read or
 calibrated is reported in the result, not raised.
 """
 
@@ -23,8 +25,6 @@ from __future__ import annotations
 import concurrent.futures as cf
 import dataclasses
 import os
-
-import numpy as np
 
 from . import calibrate as cal
 from . import compare, plots
@@ -71,6 +71,26 @@ class Comparison:
         from .report import detail
 
         return detail(self.to_json()).markdown()
+
+
+def default_label(a: str, b: str) -> str:
+    """The name of a condition whose groups are the datasets or corners files a and b
+
+    SYNOPSIS
+
+        >>> default_label("lab/seq", "lab/seq")              # the two halves of one recording
+        'seq'
+        >>> default_label("seq/corners.vnl", "seq/corners.vnl")
+        'seq'
+        >>> default_label("near/", "far/corners.vnl")
+        'near vs far'
+    """
+    def name(p):
+        p = os.path.normpath(os.path.abspath(p))
+        return os.path.basename(os.path.dirname(p)) if os.path.basename(p) == "corners.vnl" else os.path.basename(p)
+
+    na, nb = name(a), name(b)
+    return na if na == nb else f"{na} vs {nb}"
 
 
 def _calibrate(job):
@@ -165,10 +185,9 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
             evals[n] = _evaluate(*args[n])
             step(f"evaluate {n}", "done")
 
-    # figures: one colour scale for every method's maps, set by the best method (worse ones saturate)
-    cvs = [e.crossval for e in evals.values() if e.crossval is not None]
-    cbmax = plots.nice_max(max(3 * min(c.diff_median for c in cvs),
-                               2 * float(np.median([c.unc_median for c in cvs])))) if cvs else None
+    # figures: each map its own colour scale from its data (plots.heatmaps), so that 0.01 px structure shows
+    first_a, first_b = next(iter(loaded.values()))
+    label = label or default_label(first_a.seq or first_a.vnl, first_b.seq or first_b.vnl)
     methods_out = []
     for n in sets:
         if n in failed:
@@ -189,16 +208,16 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
         figs = {}
         if panels:
             fig = plots.heatmaps(e.crossval.q if e.crossval is not None else e.truth["A"].q, panels,
-                                 ca.imagersize, cbmax=cbmax, points=points, title=f"{n}: {label or ''}".rstrip(": "))
+                                 ca.imagersize, points=points, title=f"{n}: {label}")
             figs["maps"] = f"{n}-maps.png"
             fig.savefig(os.path.join(outdir, figs["maps"]), dpi=100)
             plt.close(fig)
         methods_out.append({**e.summary, "description": description(n), "figures": figs,
                             "models": {s: os.path.relpath(model[n][s], outdir) for s in "AB"},
                             "corners": {"A": os.path.abspath(ca.vnl), "B": os.path.abspath(cb.vnl)}})
-    per_pose = [(f"calibrated on A, tested on B ({label or ''})",
+    per_pose = [(f"calibrated on A, tested on B ({label})",
                  {m["method"]: m["heldout"]["A->B"]["per_pose"] for m in methods_out if m.get("heldout")}),
-                (f"calibrated on B, tested on A ({label or ''})",
+                (f"calibrated on B, tested on A ({label})",
                  {m["method"]: m["heldout"]["B->A"]["per_pose"] for m in methods_out if m.get("heldout")})]
     figures = {}
     if any(p[1] for p in per_pose):
@@ -206,9 +225,8 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
         figures["per_pose"] = "per-pose.png"
         fig.savefig(os.path.join(outdir, figures["per_pose"]), dpi=100)
         plt.close(fig)
-    first_a, first_b = next(iter(loaded.values()))
     return Comparison(
-        label=label or f"{os.path.basename(first_a.seq or first_a.vnl)} vs {os.path.basename(first_b.seq or first_b.vnl)}",
+        label=label,
         groups={"A": first_a.seq or first_a.vnl, "B": first_b.seq or first_b.vnl},
         lensmodel=lensmodel, distance_m=distance, gridn=gridn, methods=methods_out, figures=figures,
         commands=[cal.command_line(argv) for _, _, argv in cjobs], failed=len(failed), sets=len(sets))

@@ -31,6 +31,8 @@ import sys
 import mrcal
 import numpy as np
 
+from ..steps import run_tool
+
 TOLERANCE = 2.0
 """A default model passes within this factor of the better of the two"""
 
@@ -41,7 +43,7 @@ def _tool(name: str) -> str:
 
 
 def _run(argv, cwd, stdout=None) -> subprocess.CompletedProcess:
-    return subprocess.run([_tool(argv[0]), *map(str, argv[1:])], cwd=cwd, text=True,
+    return run_tool([_tool(argv[0]), *map(str, argv[1:])], cwd=cwd, text=True,
                           stdout=stdout if stdout is not None else subprocess.PIPE, stderr=subprocess.PIPE)
 
 

@@ -19,7 +19,9 @@ mrcal-calibrate-cameras wrote (it holds its optimization_inputs):
                        directions over the imager (colour = angle)
     residuals-histogram   mrcal-show-residuals --histogram
     distortion         mrcal-show-distortion-off-pinhole: the lens's distortion
-    valid-region       mrcal-show-valid-intrinsics-region --points
+    valid-region       mrcal-show-valid-intrinsics-region --points: the region
+                       and the corners the calibration used (fed on its
+                       standard input from <prefix>valid-region-points.txt)
     diff               (with other) mrcal-show-projection-diff of two
                        calibrations, e.g. the two halves of rotstar-crossval SEQ
     splined-correction (splined models only) mrcal-show-splined-model-correction
@@ -54,10 +56,11 @@ import tempfile
 import mrcal
 import numpy as np
 
+from ..steps import run_tool
 from .plots import nice_max
 
-TERMINAL = 'pngcairo size 1024,640 noenhanced font ",11"'
-"""White background (mrcal's default PNG terminal is transparent)"""
+TERMINAL = 'pngcairo size 1024,640 noenhanced font ",11" background "white"'
+"""An opaque white background: mrcal's default PNG terminal (--hardcopy alone) is transparent"""
 
 
 @dataclasses.dataclass
@@ -68,16 +71,48 @@ class Figure:
     caption: str
     cwd: str | None = None  # where the model's image paths resolve (residuals on the image)
     log: str = ""  # what the program said (draw)
+    stdin: str | None = None  # a file the program reads on its standard input (else /dev/null)
 
     @property
     def command(self) -> str:
-        return shlex.join(self.argv)
+        return with_stdin(shlex.join(self.argv), self.stdin)
+
+
+def missing_image(model: mrcal.cameramodel, image_root: str | None = None) -> str | None:
+    """The first board image of a calibration that is not on disk (paths relative to image_root, default the
+    working directory), None if all are: mrcal-show-residuals-board-observation draws a board over its image
+    only when it can read it"""
+    paths = model.optimization_inputs().get("imagepaths")
+    for p in [] if paths is None else paths:
+        if not os.path.isfile(os.path.join(image_root or os.getcwd(), str(p))):
+            return str(p)
+    return None
+
+
+def with_stdin(command: str, stdin: str | None) -> str:
+    """A shell command line reading the file stdin, if any
+
+    SYNOPSIS
+
+        >>> with_stdin("mrcal-show-valid-intrinsics-region --points m.cameramodel", "my points.txt")
+        "mrcal-show-valid-intrinsics-region --points m.cameramodel < 'my points.txt'"
+    """
+    return command + (f" < {shlex.quote(stdin)}" if stdin else "")
+
+
+def write_corners_xy(model: mrcal.cameramodel, path: str) -> str:
+    """The corners the calibration used (pixel x y, one a line, outliers left out) into path; path"""
+    obs = model.optimization_inputs()["observations_board"]
+    xy = obs[..., :2][obs[..., 2] > 0]
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    np.savetxt(path, xy, fmt="%.3f")
+    return path
 
 
 def reads_png(gnuplot: str) -> bool:
     """Can this gnuplot read PNG images (built with libgd)?"""
     try:
-        r = subprocess.run([gnuplot, "-e", "show version long"], capture_output=True, text=True, timeout=20)
+        r = run_tool([gnuplot, "-e", "show version long"], capture_output=True, text=True, timeout=20)
     except (OSError, subprocess.TimeoutExpired):
         return False
     return "+GD_PNG" in (r.stdout + r.stderr)
@@ -146,6 +181,7 @@ def show_commands(model_path: str, outdir: str, other: str | None = None, image_
     """
     model = mrcal.cameramodel(model_path)
     m1 = mrcal.cameramodel(other) if other else None
+    missing = missing_image(model, image_root)
     s = scales(model, m1)
     lens = model.intrinsics()[0]
     png = lambda name: os.path.join(outdir, f"{prefix}{name}.png")  # noqa: E731
@@ -158,8 +194,10 @@ def show_commands(model_path: str, outdir: str, other: str | None = None, image_
         Figure("residuals-worst", ["mrcal-show-residuals-board-observation", "--from-worst", "--vectorscale",
                                    f"{s['vectorscale']:g}", "--cbmax", f"{s['residual_cbmax']:g}",
                                    *common("residuals-worst"), os.path.abspath(model_path), "0"],
-               png("residuals-worst"), "the worst board's residuals over its image (vectors scaled "
-               f"{s['vectorscale']:g}x, colour: residual in px)", cwd=image_root),
+               png("residuals-worst"), ("the worst board's residuals over its image" if missing is None else
+                                        f"the worst board's residuals (without its image: {missing} is not on "
+                                        "disk)") + f" (vectors scaled {s['vectorscale']:g}x, colour: residual in px)",
+               cwd=image_root),
         Figure("residuals-directions", ["mrcal-show-residuals", "--directions", "--unset", "key",
                                         *common("residuals-directions"), model_path],
                png("residuals-directions"), "directions of the residuals over the imager (colour: angle): "
@@ -172,7 +210,9 @@ def show_commands(model_path: str, outdir: str, other: str | None = None, image_
                png("distortion"), "the lens's distortion: projection off a pinhole model, px"),
         Figure("valid-region", ["mrcal-show-valid-intrinsics-region", "--points", *common("valid-region"),
                                 model_path],
-               png("valid-region"), "the valid-intrinsics region (rotstar-calibrate's parameters) and the corners"),
+               png("valid-region"), "the valid-intrinsics region (rotstar-calibrate's parameters) and the corners "
+               "the calibration used",
+               stdin=write_corners_xy(model, os.path.join(outdir, f"{prefix}valid-region-points.txt"))),
     ]
     if other:
         figs.append(Figure("diff", ["mrcal-show-projection-diff", "--cbmax", f"{s['diff_cbmax']:g}", "--unset", "key",
@@ -191,7 +231,11 @@ def draw(figs, env=None, timeout: float = 120) -> list[Figure]:
     for f in figs:
         os.makedirs(os.path.dirname(os.path.abspath(f.png)), exist_ok=True)
         argv = [os.path.abspath(a) if f.cwd is not None and a == f.png else a for a in f.argv]
-        r = subprocess.run(argv, env=env, cwd=f.cwd, capture_output=True, text=True, timeout=timeout)
+        if f.stdin is None:
+            r = run_tool(argv, env=env, cwd=f.cwd, capture_output=True, text=True, timeout=timeout)
+        else:
+            with open(f.stdin) as points:
+                r = run_tool(argv, env=env, cwd=f.cwd, stdin=points, capture_output=True, text=True, timeout=timeout)
         f.log = r.stdout + r.stderr
         if r.returncode != 0 or not os.path.exists(f.png) or os.path.getsize(f.png) == 0:
             tail = (r.stderr.strip() or r.stdout.strip() or "no output").splitlines()[-1]
@@ -200,7 +244,7 @@ def draw(figs, env=None, timeout: float = 120) -> list[Figure]:
 
 
 def redraw_command(f: Figure) -> str:
-    """The command without --hardcopy/--terminal: mrcal draws it in a window"""
+    """The command without --hardcopy/--terminal: mrcal draws it in a window (`< file` if it reads one)"""
     argv, skip = [], 0
     for a in f.argv:
         if skip:
@@ -209,7 +253,7 @@ def redraw_command(f: Figure) -> str:
             skip = 1
         else:
             argv.append(a)
-    return shlex.join(argv)
+    return with_stdin(shlex.join(argv), f.stdin)
 
 
 def calibration_figures(model_path: str, outdir: str, other: str | None = None, image_root: str | None = None,
@@ -248,7 +292,7 @@ def uncertainty_doc(model: str, img_dir: str, doc: str, halves: tuple[str, str] 
     if splined:
         figs += [f for f in show_commands(splined, img_dir) if f.name == "splined-correction"]
     draw(figs)
-    names = names or {}
+    names = {**{f.stdin: os.path.basename(f.stdin) for f in figs if f.stdin}, **(names or {})}
 
     def shown(f):
         cmd = redraw_command(f)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import html as _html
+import re
 
 import numpy as np
 
@@ -302,6 +303,24 @@ def markdown(results, title: str, figures=(), per_condition_figures=None, notes:
     return "\n".join(out)
 
 
+def inline(text: str) -> str:
+    """Markdown's inline marks of one paragraph as HTML (escaped): `code` and **bold**
+
+    SYNOPSIS
+
+        >>> inline("run `rotstar-report a/ --out r/` (**slow** < 1 min)")
+        'run <code>rotstar-report a/ --out r/</code> (<b>slow</b> &lt; 1 min)'
+    """
+    parts = re.split(r"(`[^`]*`)", text)
+    out = []
+    for p in parts:
+        if len(p) >= 2 and p.startswith("`") and p.endswith("`"):
+            out.append(f"<code>{_html.escape(p[1:-1])}</code>")
+        else:
+            out.append(re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", _html.escape(p)))
+    return "".join(out)
+
+
 def html(results, title: str, figures=(), per_condition_figures=None, notes: str = "", stereo=()) -> str:
     """The same page as markdown(), as standalone HTML"""
     from .stereoreport import section_html
@@ -315,10 +334,10 @@ def html(results, title: str, figures=(), per_condition_figures=None, notes: str
            "img{max-width:100%}pre{background:#f4f4f4;padding:8px;overflow-x:auto;font-size:80%}</style>",
            "</head><body>", f"<h1>{e(title)}</h1>"]
     if notes:
-        out += [f"<p>{e(p)}</p>" for p in notes.strip().split("\n\n")]
+        out += [f"<p>{inline(p)}</p>" for p in notes.strip().split("\n\n")]
     if results:
         out += ["<h2>Headline</h2>", headline(results).html(), "<ul>"]
-        out += [f"<li>{e(v)}</li>" for v in verdicts(results)] + ["</ul>"]
+        out += [f"<li>{inline(v)}</li>" for v in verdicts(results)] + ["</ul>"]
         t = tilt_table(results)
         if t is not None:
             out += ["<h2>By tilt of the test poses</h2>", t.html()]
@@ -331,14 +350,14 @@ def html(results, title: str, figures=(), per_condition_figures=None, notes: str
                 out += [f"<li>{'yes' if c.passed else 'no'}: {e(c.text)}</li>" for c in v.checks] + ["</ul></li>"]
             out += ["</ol>"]
     for cap, path in figures:
-        out.append(f"<figure><img src='{e(path)}' alt='{e(cap)}'><figcaption>{e(cap)}</figcaption></figure>")
+        out.append(f"<figure><img src='{e(path)}' alt='{e(cap)}'><figcaption>{inline(cap)}</figcaption></figure>")
     for r in results:
         out += [f"<h2>{e(r['label'])}</h2>", detail(r).html()]
         out += [f"<p>{e(m['method'])} not calibrated: {e(m['error'])}</p>" for m in r["methods"] if m.get("error")]
         if r.get("lensmodel"):
             out.append(f"<p>Lens model: <code>{e(r['lensmodel'])}</code></p>")
         for cap, path in (per_condition_figures or {}).get(r["label"], []):
-            out.append(f"<figure><img src='{e(path)}' alt='{e(cap)}'><figcaption>{e(cap)}</figcaption></figure>")
+            out.append(f"<figure><img src='{e(path)}' alt='{e(cap)}'><figcaption>{inline(cap)}</figcaption></figure>")
         if r.get("commands"):
             out.append("<details><summary>commands run</summary><pre>" + e("\n".join(r["commands"]))
                        + "</pre></details>")
