@@ -1,22 +1,16 @@
-"""The programs the tools start: never on a terminal's input; the drivers' steps (scripts/demo.py,
-scripts/stereo.py) each printed, timed, stopped on failure
+"""The drivers' steps (scripts/demo.py, scripts/stereo.py): each printed, timed, stopped on failure, with the time left
 
 SYNOPSIS
 
     >>> import sys
-    >>> from rotstar_mrcal.steps import run_step, run_tool, short_path
+    >>> from rotstar_mrcal.steps import run_step, short_path
     >>> short_path("out/seq")
     'out/seq'
     >>> r = run_step([sys.executable, "-c", "print(6 * 7)"], "demo", capture_output=True, text=True)
     >>> r.stdout
     '42\\n'
-    >>> run_tool([sys.executable, "-c", "import sys; print(repr(sys.stdin.read()))"], capture_output=True,
-    ...          text=True).stdout            # a closed standard input: never waits on a terminal
-    "''\\n"
 
-run_tool is subprocess.run with the standard input closed (/dev/null)
-unless the data it needs is given (input=...) or a stdin= is: every program
-the tools start goes through it, so that none waits on a terminal.
+Every step runs through rotstar_mrcal.programs.run_tool (a closed standard input).
 
 run_step prints "$ <command>" before and "  (<seconds> s)" after to stderr,
 and exits with "<who>: step failed (<program>, exit <status>)" when the
@@ -42,6 +36,8 @@ import shlex
 import subprocess
 import sys
 import time
+
+from .programs import run_tool
 
 
 def log(msg: str) -> None:
@@ -112,13 +108,6 @@ def start_clock(path: str) -> Clock:
     global _clock
     _clock = Clock(path)
     return _clock
-
-
-def run_tool(cmd, **kw) -> subprocess.CompletedProcess:
-    """subprocess.run(cmd, **kw) with stdin=subprocess.DEVNULL unless input= or stdin= is given"""
-    if "input" not in kw:
-        kw.setdefault("stdin", subprocess.DEVNULL)
-    return subprocess.run(cmd, **kw)
 
 
 def run_step(cmd, who: str, **kw) -> subprocess.CompletedProcess:

@@ -17,7 +17,7 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 from rotstar_mrcal.docblock import rewrite_block  # noqa: E402
-from rotstar_mrcal.steps import run_tool  # noqa: E402
+from rotstar_mrcal.programs import run_tool  # noqa: E402
 from rotstar_mrcal.validate.modelcheck import run_case, table  # noqa: E402
 
 

@@ -29,7 +29,7 @@ import subprocess
 import sys
 
 from ..methods import METHODS, PoseImages
-from ..steps import run_tool
+from ..programs import run_tool
 
 
 def proc_status_kb(key: str) -> int:

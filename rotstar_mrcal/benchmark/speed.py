@@ -60,7 +60,7 @@ import time
 
 import numpy as np
 
-from ..steps import run_tool
+from ..programs import run_tool
 
 GOAL_RATIO = 2.0  # detect (start-up included) / decode
 GOAL_VS_MRGINGHAM = 0.5  # rotstar-detect / mrgingham on the same images

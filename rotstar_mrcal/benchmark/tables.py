@@ -26,7 +26,7 @@ import shutil
 import numpy as np
 
 from ..methods import METHODS
-from ..steps import run_tool
+from ..programs import run_tool
 from .scene import SQUARE_N
 from .scoring import MATCH_PX, START_PERTURB_PX
 

@@ -37,7 +37,7 @@ import tempfile
 
 import numpy as np
 
-from ..steps import run_tool
+from ..programs import run_tool
 from .source import CaptureError, Frame, FrameSource
 
 PIXELFORMATS = {"R8": np.uint8, "R16": np.dtype("<u2"), "GREY": np.uint8, "Y16": np.dtype("<u2")}

@@ -8,7 +8,7 @@ import os
 import sys
 
 from .. import dataset
-from ..steps import run_tool
+from ..programs import run_tool
 from ..validate import calibrate as cal
 from ..validate.sources import SourceError, load_corner_set
 from .common import HelpFormatter, atomic_write, exit_status_help, make_folder, run, say

@@ -46,7 +46,7 @@ import shutil
 import cv2
 import numpy as np
 
-from ..steps import run_tool
+from ..programs import run_tool
 
 __all__ = [
     "average_frames",

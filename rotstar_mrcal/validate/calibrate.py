@@ -100,7 +100,7 @@ import mrcal
 import numpy as np
 
 from ..atomic import atomic_path
-from ..steps import run_tool
+from ..programs import run_tool
 
 LEAN_LENSMODEL = "LENSMODEL_OPENCV8"
 """The lean model: rotstar-detect's printed command, rotstar-crossval, the first fit of rotstar-calibrate"""

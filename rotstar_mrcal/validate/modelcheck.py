@@ -31,7 +31,7 @@ import sys
 import mrcal
 import numpy as np
 
-from ..steps import run_tool
+from ..programs import run_tool
 
 TOLERANCE = 2.0
 """A default model passes within this factor of the better of the two"""

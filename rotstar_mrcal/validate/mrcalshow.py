@@ -56,7 +56,7 @@ import tempfile
 import mrcal
 import numpy as np
 
-from ..steps import run_tool
+from ..programs import run_tool
 from .plots import nice_max
 
 TERMINAL = 'pngcairo size 1024,640 noenhanced font ",11" background "white"'
