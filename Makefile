@@ -96,7 +96,7 @@ coverage-bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/coverage_bench.py --work coverage-bench-out --doc
 
 pip-check: check-python
-	PYTHON=$(PYTHON) $(VENV_BIN)/python -m pytest -q -s -m slow tests/test_pip_install.py
+	PYTHON=$(PYTHON) $(VENV_BIN)/python -m pytest -q -s -m slow tests/cli/test_pip_install.py
 
 clean:
 	rm -rf .venv .tools $(DEMO_DIR) $(STEREO_DIR) .pytest_cache calib-bench-out coverage-bench-out

@@ -40,8 +40,8 @@ import warnings
 import cv2
 import numpy as np
 
-from .atomic import atomic_folder, atomic_path
-from .pattern.layout import Layout, layout_from_dict
+from rotstar_mrcal.atomic import atomic_folder, atomic_path
+from rotstar_mrcal.pattern.layout import Layout, layout_from_dict
 
 
 class DatasetError(Exception):

@@ -19,18 +19,18 @@ README.md.
 The scene, the methods, the scoring, the timing and the memory are the
 package's; this script only strings them together:
 
-    rotstar_mrcal.methods          the corner methods (one registry)
-    rotstar_mrcal.benchmark.scene        camera, layouts, poses; the rendered images of a pose
-    rotstar_mrcal.benchmark.detection    every method on every pose, timed on one CPU, scored
-    rotstar_mrcal.benchmark.scoring      a board against the truth, per-pose rows, summaries, goals
-    rotstar_mrcal.benchmark.timing       one pinned CPU, CPU and wall time of a call
-    rotstar_mrcal.benchmark.memory       the peak memory of one call, in a fresh process
-    rotstar_mrcal.benchmark.calibration  each method's boards calibrated with mrcal, against the truth
-    rotstar_mrcal.benchmark.speed        decode and detect time per pose, start-up, mrgingham, profile
-    rotstar_mrcal.benchmark.tables       the Markdown tables, bench.json, README's sentence
-    rotstar_mrcal.benchmark.plots        the corner error CDF
-    rotstar_mrcal.benchmark.partial      partial views: boards over the image's edges, rotstar against ChArUco
-    rotstar_mrcal.benchmark.failures     each method's failure modes: saturation, gamma mismatch, tilt and roll, noise
+    rotstar_mrcal.peers.registry          the corner methods (one registry)
+    rotstar_lab.benchmark.scene        camera, layouts, poses; the rendered images of a pose
+    rotstar_lab.benchmark.detection    every method on every pose, timed on one CPU, scored
+    rotstar_lab.benchmark.scoring      a board against the truth, per-pose rows, summaries, goals
+    rotstar_lab.benchmark.timing       one pinned CPU, CPU and wall time of a call
+    rotstar_lab.benchmark.memory       the peak memory of one call, in a fresh process
+    rotstar_lab.benchmark.calibration  each method's boards calibrated with mrcal, against the truth
+    rotstar_lab.benchmark.speed        decode and detect time per pose, start-up, mrgingham, profile
+    rotstar_lab.benchmark.tables       the Markdown tables, bench.json, README's sentence
+    rotstar_lab.benchmark.plots        the corner error CDF
+    rotstar_lab.benchmark.partial      partial views: boards over the image's edges, rotstar against ChArUco
+    rotstar_lab.benchmark.failures     each method's failure modes: saturation, gamma mismatch, tilt and roll, noise
 
 See doc/benchmark.md.
 """
@@ -53,11 +53,11 @@ import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 
-from rotstar_mrcal.benchmark import calibration, detection, failures, partial, scene as scenes, scoring, tables  # noqa: E402
-from rotstar_mrcal.benchmark.plots import plot_cdf  # noqa: E402
-from rotstar_mrcal.docblock import rewrite_block  # noqa: E402
-from rotstar_mrcal.benchmark import speed  # noqa: E402
-from rotstar_mrcal.methods import METHODS  # noqa: E402
+from rotstar_lab.benchmark import calibration, detection, failures, partial, scene as scenes, scoring, tables  # noqa: E402
+from rotstar_lab.benchmark.plots import plot_cdf  # noqa: E402
+from rotstar_lab.docblock import rewrite_block  # noqa: E402
+from rotstar_lab.benchmark import speed  # noqa: E402
+from rotstar_mrcal.peers.registry import METHODS  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOCUMENTED = {"poses": 20, "seed": 0, "bits": 16, "partial": 34, "whole": 10}  # the run doc/benchmark.md shows

@@ -3,7 +3,7 @@
 
     python scripts/calib_bench.py [--poses 12 20 40] [--seed 0] [--work calib-bench] [--jobs 2] [--doc]
 
-Prints the table (rotstar_mrcal.validate.modelcheck); with --doc also
+Prints the table (rotstar_lab.modelcheck); with --doc also
 writes it into doc/validation.md between its calib-bench markers. Exit 1 if a
 default run is neither within 2x the better model nor refused with a reason.
 """
@@ -16,15 +16,15 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from rotstar_mrcal.docblock import rewrite_block  # noqa: E402
+from rotstar_lab.docblock import rewrite_block  # noqa: E402
 from rotstar_mrcal.programs import run_tool  # noqa: E402
-from rotstar_mrcal.validate.modelcheck import run_case, table  # noqa: E402
+from rotstar_lab.modelcheck import run_case, table  # noqa: E402
 
 
 def figures_doc(work, n, seed, docdir, jobs):
     """doc/uncertainty.md's pictures from the n-pose capture: its calibration, its two halves, its splined fit"""
 
-    from rotstar_mrcal.validate.mrcalshow import uncertainty_doc
+    from rotstar_mrcal.report.mrcalshow import uncertainty_doc
 
     name = f"d435-{n}poses-seed{seed}"
     xval = f"{name}-xval"

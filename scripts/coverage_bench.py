@@ -9,7 +9,7 @@ Simulates both captures on the D435 preset, detects them with rotstar,
 calibrates each with mrcal (one lens model for both) and measures mrcal's
 projection uncertainty and the error against the true camera at the imager's
 corners, over its outer 10 % and in the centre
-(rotstar_mrcal.benchmark.coverage). One experiment per seed (other poses):
+(rotstar_lab.benchmark.coverage). One experiment per seed (other poses):
 prints the first seed's table, the ratios of every seed and the verdict (is
 the uncertainty at every imager corner at least 2x lower with hanging
 boards?); writes results.json and the first seed's coverage.png into --work. With --doc also writes the
@@ -28,8 +28,8 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from rotstar_mrcal.benchmark.coverage import figure, run, seeds_table, table, verdict  # noqa: E402
-from rotstar_mrcal.docblock import rewrite_block  # noqa: E402
+from rotstar_lab.benchmark.coverage import figure, run, seeds_table, table, verdict  # noqa: E402
+from rotstar_lab.docblock import rewrite_block  # noqa: E402
 
 MIN_HANGING_USED = 0.75
 """--doc needs boards from at least this fraction of the hanging poses"""

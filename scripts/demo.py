@@ -6,12 +6,12 @@ SYNOPSIS
     python scripts/demo.py --out demo-out          # what `make demo` runs (~2.5 min on 2 cores)
     python scripts/demo.py --out /tmp/d --quick    # fewer poses, for a smoke run
 
-The set-up (camera, coma, pose groups, exposures) is rotstar_mrcal.demo.scene;
-the methods are rotstar_mrcal.methods' with demo=True. The chain, each step
+The set-up (camera, coma, pose groups, exposures) is rotstar_lab.demo.scene;
+the methods are rotstar_mrcal.peers.registry' with demo=True. The chain, each step
 printed before it runs:
 
 1. rotstar-pattern (the screen's frames and pattern.json);
-2. rendering and detection (here, in --jobs processes, rotstar_mrcal.demo.capture):
+2. rendering and detection (here, in --jobs processes, rotstar_lab.demo.capture):
    every method on every pose and exposure, written as corners.vnl files next
    to each group's truth; OpenCV's ChArUco detector on a ChArUco board whose
    corners are the grid's (pattern.charuco), at the same poses; mrgingham on
@@ -25,7 +25,7 @@ printed before it runs:
 The pattern is the paper's whole sequence (rotstar-pattern --paper-sequence),
 so the phase-shift and star methods run beside rotstar and the checkerboard
 ones. The report's path, its headline table and the paper's claims as
-verdicts (rotstar_mrcal.validate.claims) are printed at the end (stdout); a
+verdicts (rotstar_lab.claims) are printed at the end (stdout); a
 full run (not --quick, seed 1) also writes the table and the verdict lines
 into the marked blocks of README.md, and the table, the error by tilt of the
 test poses and every claim with its numbers into doc/validation.md
@@ -51,11 +51,11 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
-from rotstar_mrcal.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
+from rotstar_lab.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
 
 
 def run(cmd, **kw):
-    """A step of make demo (rotstar_mrcal.steps.run_step)"""
+    """A step of make demo (rotstar_lab.steps.run_step)"""
     return run_step(cmd, "demo", **kw)
 
 
@@ -76,8 +76,8 @@ def parse_args(argv=None):
 
 def corner_sets(a, out: str) -> tuple[dict, dict]:
     """Steps 1-2: the pattern, every pose rendered and detected; ({exposure: {method: {group: vnl}}}, crops)"""
-    from rotstar_mrcal.demo import capture, plots, scene, sets
-    from rotstar_mrcal.methods import method_names
+    from rotstar_lab.demo import capture, plots, scene, sets
+    from rotstar_mrcal.peers.registry import method_names
     from rotstar_mrcal.simulate.poses import centred_pose
 
     pat = os.path.join(out, "pattern")
@@ -116,7 +116,7 @@ def corner_sets(a, out: str) -> tuple[dict, dict]:
 
 def crossval_and_report(a, out: str, found: dict, crops: dict) -> tuple[str, str]:
     """Steps 3-4: rotstar-crossval per exposure, rotstar-report over them; (report folder, its headline)"""
-    from rotstar_mrcal.demo import scene
+    from rotstar_lab.demo import scene
 
     xdirs = []
     for label, _ in scene.EXPOSURES:
@@ -142,7 +142,7 @@ def write_docs(headline: str, rep: str, seconds: float) -> None:
     and the paper's claims in short into README.md (demo:claims), whole with the table by tilt (the report's paper.md) into
     doc/validation.md (demo:paper); the report's figure against the truth as doc/img/demo-vs-truth.png; the run's
     wall time (seconds) and cores into README.md (demo:time)"""
-    from rotstar_mrcal.docblock import rewrite_block
+    from rotstar_lab.docblock import rewrite_block
 
     lines = headline.splitlines()
     table = "\n".join(line for line in lines if line.startswith("|"))
@@ -164,7 +164,7 @@ def write_docs(headline: str, rep: str, seconds: float) -> None:
 def main(argv=None) -> int:
     a = parse_args(argv)
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))  # workers stopped on the way out
-    from rotstar_mrcal.demo.scene import EXPOSURES, exposure_dir
+    from rotstar_lab.demo.scene import EXPOSURES, exposure_dir
 
     t0 = time.monotonic()
     out = os.path.abspath(a.out)

@@ -24,7 +24,7 @@ The chain, each command printed (stderr) before it runs:
    started from rotstar's corners; both from the same poses):
    rotstar-detect --method, then rotstar-calibrate --corners (one joint
    mrcal-calibrate-cameras solve of all cameras, LENSMODEL_OPENCV8);
-5. per method (rotstar_mrcal.validate.stereo.evaluate): each camera of each
+5. per method (rotstar_mrcal.evaluate.stereo.evaluate): each camera of each
    calibration against the true camera, camera 1's baseline and rotation
    against the truth, the cross-validation of A against B, and the depth
    error of held-out boards at 0.5, 1 and 2 m (validate.depth: their
@@ -56,11 +56,11 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
-from rotstar_mrcal.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
+from rotstar_lab.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
 
 
 def run(cmd, **kw):
-    """A step of make stereo (rotstar_mrcal.steps.run_step)"""
+    """A step of make stereo (rotstar_lab.steps.run_step)"""
     return run_step(cmd, "stereo", **kw)
 
 
@@ -70,7 +70,7 @@ DEFAULT_POSES = 24
 METHODS = ("rotstar", "saddle")
 LENSMODEL = "LENSMODEL_OPENCV8"
 SUPERSAMPLE = 2
-LENS = "coma=1.5,focus=0.3"  # make demo's lens (rotstar_mrcal.demo.scene), for every camera of the rig
+LENS = "coma=1.5,focus=0.3"  # make demo's lens (rotstar_lab.demo.scene), for every camera of the rig
 
 
 def parse_args(argv=None):
@@ -135,8 +135,8 @@ def corner_rms(vnls, truth) -> float:
     """RMS (per coordinate, px) of a method's corners against the true projections, over its corners files"""
     import numpy as np
 
-    from rotstar_mrcal.validate.rig import camera_of
-    from rotstar_mrcal.validate.stereo import _component
+    from rotstar_mrcal.calibrate.rig import camera_of
+    from rotstar_mrcal.evaluate.stereo import _component
     from rotstar_mrcal.vnl import read_corners
 
     lay = truth.layout
@@ -157,7 +157,7 @@ def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
     import mrcal
 
     from rotstar_mrcal.simulate.rig import load_rig_truth
-    from rotstar_mrcal.validate import depth, stereo
+    from rotstar_mrcal.evaluate import depth, stereo
 
     truth = load_rig_truth(seq)
     true = tuple(truth.models[:2])
@@ -198,8 +198,8 @@ def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
 def write_docs(result: dict, seconds: float) -> None:
     """The tables into doc/validation.md (stereo:tables), the headline into README.md (stereo:headline) and
     the run's wall time (seconds) and cores under it (stereo:time)"""
-    from rotstar_mrcal.docblock import rewrite_block
-    from rotstar_mrcal.validate import stereoreport
+    from rotstar_lab.docblock import rewrite_block
+    from rotstar_mrcal.report import stereo as stereoreport
 
     said = "\n".join(f"- {v}" for v in stereoreport.verdicts(result))
     full = said + "\n\n" + "\n".join(f"**{title}**\n\n{t.markdown()}\n\n*{t.caption}*\n"
@@ -237,7 +237,7 @@ def main(argv=None) -> int:
     run(["rotstar-report", short_path(sdir), "--out", short_path(rep), "--no-mrcal-figures",
          "--title", "rotstar-mrcal stereo: a simulated D435 pair calibrated twice, against the truth and in depth"],
         stdout=subprocess.DEVNULL)
-    from rotstar_mrcal.validate import stereoreport
+    from rotstar_mrcal.report import stereo as stereoreport
 
     print(f"rotstar-mrcal stereo ({time.monotonic() - t0:.0f} s): report {os.path.join(rep, 'index.html')} "
           "(also index.md)")

@@ -178,7 +178,7 @@ def test_calibration_uses_the_boards_we_say(tmp_path):
     """The real mrcal-calibrate-cameras on a file with a sparse board: it solves exactly the boards written"""
     from rotstar_mrcal.pattern.layout import make_layout
     from rotstar_mrcal.simulate import preset_model, random_poses, true_corners
-    from rotstar_mrcal.validate.calibrate import calibrate_argv, run_calibration
+    from rotstar_mrcal.calibrate.solve import calibrate_argv, run_calibration
 
     model, layout = preset_model("d435"), make_layout()
     rts = random_poses(model, layout, 7, np.random.default_rng(3), max_tilt_deg=40.0)
@@ -202,7 +202,7 @@ def test_corner_sets_count_the_boards_mrcal_uses(tmp_path):
     """A file another detector wrote, with a sparse board: rotstar-calibrate's checks count what mrcal will use"""
     from rotstar_mrcal import dataset
     from rotstar_mrcal.pattern.layout import make_layout
-    from rotstar_mrcal.validate.sources import load_corner_set
+    from rotstar_mrcal.calibrate.cornerset import load_corner_set
 
     layout = make_layout()
     dataset.write_pattern(str(tmp_path), layout)

@@ -3,7 +3,8 @@
 SYNOPSIS
 
     >>> import numpy as np
-    >>> from rotstar_mrcal.capture import ArraySource, record, threshold, stable_runs
+    >>> from rotstar_mrcal.capture.source import ArraySource, record
+    >>> from rotstar_mrcal.capture.segment import threshold, stable_runs
     >>> rec = record(ArraySource(np.zeros((6, 4, 4), np.uint8)), 6)
     >>> rec.frames.shape, rec.full_scale
     ((6, 4, 4), 255.0)
@@ -40,8 +41,10 @@ Modules, one concept each:
 See doc/capture.md.
 """
 
-from .segment import Options, SegmentError, Segmentation, segment, stable_runs, threshold
-from .source import ArraySource, CaptureError, ControlError, Frame, FrameSource, Recording, record
+from rotstar_mrcal.capture.segment import Options, SegmentError, Segmentation, segment, stable_runs, threshold
+from rotstar_mrcal.capture.source import (
+    ArraySource, CaptureError, ControlError, Frame, FrameSource, Recording, record,
+)
 
 __all__ = ["Options", "SegmentError", "Segmentation", "segment", "stable_runs", "threshold",
            "ArraySource", "CaptureError", "ControlError", "Frame", "FrameSource", "Recording", "record"]

@@ -37,8 +37,8 @@ import tempfile
 
 import numpy as np
 
-from ..programs import run_tool
-from .source import CaptureError, Frame, FrameSource
+from rotstar_mrcal.programs import run_tool
+from rotstar_mrcal.capture.source import CaptureError, Frame, FrameSource
 
 PIXELFORMATS = {"R8": np.uint8, "R16": np.dtype("<u2"), "GREY": np.uint8, "Y16": np.dtype("<u2")}
 LIBCAMERA_NAMES = {"GREY": "R8", "Y16": "R16", "Y16 ": "R16"}

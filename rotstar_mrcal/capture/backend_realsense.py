@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .source import CaptureError, ControlError, Frame, FrameSource
+from rotstar_mrcal.capture.source import CaptureError, ControlError, Frame, FrameSource
 
 
 def _rs():

@@ -40,9 +40,9 @@ import re
 import cv2
 import numpy as np
 
-from .interleaved import BYTES_PER_PIXEL, InterleavedError, unpack
-from .source import CaptureError, Frame, FrameSource
-from .v4l2 import PIXEL_FORMATS
+from rotstar_mrcal.capture.interleaved import BYTES_PER_PIXEL, InterleavedError, unpack
+from rotstar_mrcal.capture.source import CaptureError, Frame, FrameSource
+from rotstar_mrcal.capture.v4l2 import PIXEL_FORMATS
 
 IMAGE_EXTENSIONS = (".png", ".tif", ".tiff", ".pgm", ".pnm", ".bmp")
 

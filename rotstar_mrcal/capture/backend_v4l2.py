@@ -29,12 +29,14 @@ gives its luma as a uint8 grey view (colour.py).
 
 from __future__ import annotations
 
-from . import d435
-from .colour import COLOUR_FORMATS, ColourError, to_grey
-from .interleaved import InterleavedError, unpack
-from .source import CaptureError, ControlError, Frame, FrameSource
-from .v4l2 import (CID_EXPOSURE_ABSOLUTE, CID_EXPOSURE_AUTO, CID_GAIN, EXPOSURE_MANUAL, PIXEL_FORMATS, Device,
-                   Syscalls, V4L2Error)
+from rotstar_mrcal.capture import d435
+from rotstar_mrcal.capture.colour import COLOUR_FORMATS, ColourError, to_grey
+from rotstar_mrcal.capture.interleaved import InterleavedError, unpack
+from rotstar_mrcal.capture.source import CaptureError, ControlError, Frame, FrameSource
+from rotstar_mrcal.capture.v4l2 import (
+    CID_EXPOSURE_ABSOLUTE, CID_EXPOSURE_AUTO, CID_GAIN, EXPOSURE_MANUAL, PIXEL_FORMATS, Device, Syscalls,
+    V4L2Error,
+)
 
 STEREO_FORMATS = ("Y12I", "Y8I ")
 

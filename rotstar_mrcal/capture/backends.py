@@ -17,9 +17,9 @@ rates, controls with their values and, on a D4xx, the extension-unit values.
 
 from __future__ import annotations
 
-from . import d435
-from .source import CaptureError, FrameSource
-from .v4l2 import Device, Syscalls, V4L2Error
+from rotstar_mrcal.capture import d435
+from rotstar_mrcal.capture.source import CaptureError, FrameSource
+from rotstar_mrcal.capture.v4l2 import Device, Syscalls, V4L2Error
 
 BACKENDS = ("v4l2", "libcamera", "realsense", "replay")
 
@@ -30,7 +30,7 @@ def open_source(backend: str = "v4l2", device: str | None = None, camera: str = 
                 dev_root: str = "/dev", stereo: bool = False) -> FrameSource:
     """A FrameSource for the backend; see the module docstring"""
     if backend == "v4l2":
-        from .backend_v4l2 import V4L2Source
+        from rotstar_mrcal.capture.backend_v4l2 import V4L2Source
 
         if device is None:
             if camera != "d435":
@@ -40,15 +40,15 @@ def open_source(backend: str = "v4l2", device: str | None = None, camera: str = 
     if stereo:
         raise CaptureError(f"both infrared imagers are recorded over V4L2, not the {backend} backend")
     if backend == "libcamera":
-        from .backend_libcamera import LibcameraSource
+        from rotstar_mrcal.capture.backend_libcamera import LibcameraSource
 
         return LibcameraSource(camera=device or "1", size=size, pixelformat=fourcc.strip(), fps=fps)
     if backend == "realsense":
-        from .backend_realsense import RealSenseSource
+        from rotstar_mrcal.capture.backend_realsense import RealSenseSource
 
         return RealSenseSource(size=size, fourcc=fourcc.strip(), fps=fps or 25, serial=serial)
     if backend == "replay":
-        from .backend_replay import ReplaySource
+        from rotstar_mrcal.capture.backend_replay import ReplaySource
 
         if device is None:
             raise CaptureError("the replay backend needs --device RECORDING (a folder of frames, .npy, .raw or video)")

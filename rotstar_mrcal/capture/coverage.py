@@ -38,7 +38,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..vnl import mrcal_keeps
+from rotstar_mrcal.vnl import mrcal_keeps
 
 ZONES = ("top-left corner", "top-right corner", "bottom-left corner", "bottom-right corner",
          "left edge", "right edge", "top edge", "bottom edge")

@@ -37,9 +37,9 @@ import dataclasses
 import os
 import re
 
-from .source import CaptureError, ControlError
-from .uvc_xu import D4XX, xu_get, xu_range, xu_set
-from .v4l2 import Device, Syscalls, V4L2Error
+from rotstar_mrcal.capture.source import CaptureError, ControlError
+from rotstar_mrcal.capture.uvc_xu import D4XX, xu_get, xu_range, xu_set
+from rotstar_mrcal.capture.v4l2 import Device, Syscalls, V4L2Error
 
 INTEL_VENDOR = 0x8086
 D4XX_PRODUCTS = {  # librealsense src/ds/d400/d400-private.h

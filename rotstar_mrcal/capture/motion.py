@@ -28,7 +28,7 @@ frames (about half of the elements flip, a quarter of the board's area) sinks
 into the noise of the room around the screen (a D435 with the default board
 at 0.6 m: barely above segmentation's threshold; at 0.9 m below it). Over
 the screen's pixels it is many times the noise at any distance
-(tests/test_segment.py, the board's corners on 1 % of the image).
+(tests/capture/test_segment.py, the board's corners on 1 % of the image).
 
 image_shift measures how far the image moved between two (averaged)
 frames of the same display frame: one Lucas-Kanade step for a translation

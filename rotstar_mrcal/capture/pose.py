@@ -32,11 +32,11 @@ import os
 
 import numpy as np
 
-from .. import dataset
-from ..atomic import atomic_folder, atomic_write
-from ..detect.pipeline import PoseCorners, detect_pose
-from ..pattern.layout import Layout, layout_from_dict
-from .segment import Segmentation
+from rotstar_mrcal import dataset
+from rotstar_mrcal.atomic import atomic_folder, atomic_write
+from rotstar_mrcal.detect.pipeline import PoseCorners, detect_pose
+from rotstar_mrcal.pattern.layout import Layout, layout_from_dict
+from rotstar_mrcal.capture.segment import Segmentation
 
 
 def value_scale(max_value: float, full_scale: float) -> tuple[float, str]:

@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .source import CaptureError, Frame, FrameSource, Recording
+from rotstar_mrcal.capture.source import CaptureError, Frame, FrameSource, Recording
 
 
 def _views(src: FrameSource, timeout: float) -> list[Frame] | None:

@@ -41,10 +41,12 @@ import dataclasses
 
 import numpy as np
 
-from ..display.loop import expected_levels, player_loop
-from ..pattern.layout import Layout
-from .motion import difference_signal, screen_pixels
-from .segment import Options, Segmentation, SegmentError, _mean, check_order, segment, threshold
+from rotstar_mrcal.pattern.loop import expected_levels, player_loop
+from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.capture.motion import difference_signal, screen_pixels
+from rotstar_mrcal.capture.segment import (
+    Options, Segmentation, SegmentError, _mean, check_order, segment, threshold,
+)
 
 
 @dataclasses.dataclass

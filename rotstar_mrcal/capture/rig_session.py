@@ -32,14 +32,14 @@ import shutil
 
 import numpy as np
 
-from ..atomic import allocated_npy, atomic_write, whole_or_none
-from .pose import write_segmented
-from .rig import RigSource, record_rig
-from .rig_segment import segment_rig
-from .motion import difference_signal, screen_pixels
-from .segment import SegmentError, threshold
-from .source import CaptureError
-from .session import OutputDataset, PoseOutcome, SessionOptions, process_segmented
+from rotstar_mrcal.atomic import allocated_npy, atomic_write, whole_or_none
+from rotstar_mrcal.capture.pose import write_segmented
+from rotstar_mrcal.capture.rig import RigSource, record_rig
+from rotstar_mrcal.capture.rig_segment import segment_rig
+from rotstar_mrcal.capture.motion import difference_signal, screen_pixels
+from rotstar_mrcal.capture.segment import SegmentError, threshold
+from rotstar_mrcal.capture.source import CaptureError
+from rotstar_mrcal.capture.session import OutputDataset, PoseOutcome, SessionOptions, process_segmented
 
 
 class RigDataset:

@@ -80,9 +80,9 @@ import math
 
 import numpy as np
 
-from ..display.loop import expected_levels, player_loop
-from ..pattern.layout import Layout
-from .motion import difference_signal, image_shift, noise_floor, screen_pixels
+from rotstar_mrcal.pattern.loop import expected_levels, player_loop
+from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.capture.motion import difference_signal, image_shift, noise_floor, screen_pixels
 
 
 class SegmentError(Exception):

@@ -27,14 +27,14 @@ import os
 import cv2
 import numpy as np
 
-from ..atomic import allocated_npy, atomic_path, atomic_write
-from ..detect.display import DisplayCheck, dataset_offsets
-from ..vnl import mrcal_keeps, mrcal_min_corners
-from . import coverage
-from .motion import difference_signal, downsample, is_still, screen_pixels
-from .pose import quick_check, value_scale, write_segmented
-from .segment import Options, SegmentError, segment, threshold
-from .source import CaptureError, FrameSource, record
+from rotstar_mrcal.atomic import allocated_npy, atomic_path, atomic_write
+from rotstar_mrcal.detect.display_offsets import DisplayCheck, dataset_offsets
+from rotstar_mrcal.vnl import mrcal_keeps, mrcal_min_corners
+from rotstar_mrcal.capture import coverage
+from rotstar_mrcal.capture.motion import difference_signal, downsample, is_still, screen_pixels
+from rotstar_mrcal.capture.pose import quick_check, value_scale, write_segmented
+from rotstar_mrcal.capture.segment import Options, SegmentError, segment, threshold
+from rotstar_mrcal.capture.source import CaptureError, FrameSource, record
 
 
 @dataclasses.dataclass

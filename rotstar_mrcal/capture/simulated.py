@@ -45,10 +45,10 @@ import os
 import cv2
 import numpy as np
 
-from ..display.loop import player_loop
-from ..simulate.exposure import expose
-from ..simulate.irradiance import render_irradiance
-from ..simulate.screen import exact_frames, make_screen
+from rotstar_mrcal.pattern.loop import player_loop
+from rotstar_mrcal.simulate.exposure import expose
+from rotstar_mrcal.simulate.irradiance import render_irradiance
+from rotstar_mrcal.simulate.screen import exact_frames, make_screen
 
 
 def loop_irradiance(layout, model, rt_cam_board, supersample: int = 4, psf=1.0, room: float = 0.02,
@@ -159,7 +159,7 @@ def write_player_recording(path: str, layout, model, rts, *, hold: int, refresh_
     OSError naming it, nothing left behind); frames are rendered in chunks.
     The .json beside it (backend_replay) holds the sequence numbers and fps.
     """
-    from ..atomic import allocated_npy, atomic_write
+    from rotstar_mrcal.atomic import allocated_npy, atomic_write
 
     n_entries = len(player_loop(layout.frames()))
     loop_s = n_entries * hold / refresh_hz

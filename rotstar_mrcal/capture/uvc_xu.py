@@ -27,7 +27,7 @@ from __future__ import annotations
 import ctypes as C
 import dataclasses
 
-from .v4l2 import Device, V4L2Error, _IOWR
+from rotstar_mrcal.capture.v4l2 import Device, V4L2Error, _IOWR
 
 UVC_SET_CUR = 0x01
 UVC_GET_CUR = 0x81

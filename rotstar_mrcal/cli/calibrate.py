@@ -7,11 +7,11 @@ import json
 import os
 import sys
 
-from .. import dataset
-from ..programs import run_tool
-from ..validate import calibrate as cal
-from ..validate.sources import SourceError, load_corner_set
-from .common import HelpFormatter, atomic_write, exit_status_help, make_folder, run, say
+from rotstar_mrcal import dataset
+from rotstar_mrcal.programs import run_tool
+from rotstar_mrcal.calibrate import solve as cal
+from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
+from rotstar_mrcal.cli.common import HelpFormatter, atomic_write, exit_status_help, make_folder, run, say
 
 DESCRIPTION = f"""\
 Calibrate a camera from a rotating-star dataset with mrcal: detect the
@@ -167,7 +167,7 @@ def report(c, outdir: str, unkept: str) -> None:
 
 def _main_rig(a) -> int:
     """rotstar-calibrate on a multi-camera dataset: one joint solve (validate.rig)"""
-    from ..validate import rig
+    from rotstar_mrcal.calibrate import rig
 
     for stale in [f for f in os.listdir(a.outdir) if f.startswith("camera-") and f.endswith(".cameramodel")] + [
             "calibration.json"]:

@@ -14,18 +14,22 @@ import time
 
 import numpy as np
 
-from .. import dataset
-from ..capture.backends import BACKENDS, describe_nodes, open_source
-from ..capture.d435 import DEFAULT_FPS, DEFAULT_FOURCC, DEFAULT_SIZE, format_warning
-from ..capture.rig import RigSource
-from ..capture.rig_session import RigDataset, capture_rig_one
-from ..capture.session import OutputDataset, SessionOptions, capture_one, next_free_pose, wait_for_new_view
-from ..capture.source import CaptureError, ControlError, FrameSource, skip
-from ..display.loop import player_loop
-from ..display.player import DEFAULT_HOLD
-from .common import EXIT_FAILED, EXIT_INTERRUPTED, HelpFormatter, atomic_write, check_output_path, exit_status_help, fail, \
-    out_line, run, say, size_arg
-from .segment_args import add_segment_options, options_from
+from rotstar_mrcal import dataset
+from rotstar_mrcal.capture.backends import BACKENDS, describe_nodes, open_source
+from rotstar_mrcal.capture.d435 import DEFAULT_FPS, DEFAULT_FOURCC, DEFAULT_SIZE, format_warning
+from rotstar_mrcal.capture.rig import RigSource
+from rotstar_mrcal.capture.rig_session import RigDataset, capture_rig_one
+from rotstar_mrcal.capture.session import (
+    OutputDataset, SessionOptions, capture_one, next_free_pose, wait_for_new_view,
+)
+from rotstar_mrcal.capture.source import CaptureError, ControlError, FrameSource, skip
+from rotstar_mrcal.pattern.loop import player_loop
+from rotstar_mrcal.pattern.player import DEFAULT_HOLD
+from rotstar_mrcal.cli.common import (
+    EXIT_FAILED, EXIT_INTERRUPTED, HelpFormatter, atomic_write, check_output_path, exit_status_help, fail,
+    out_line, run, say, size_arg,
+)
+from rotstar_mrcal.cli.segment_args import add_segment_options, options_from
 
 DESCRIPTION = """\
 Record the display sequence that player.html loops on the screen (the

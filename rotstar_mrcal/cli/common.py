@@ -14,7 +14,7 @@ import threading
 import time
 from typing import NoReturn
 
-from ..atomic import atomic_path, atomic_write  # noqa: F401  (re-exported: the commands write through these)
+from rotstar_mrcal.atomic import atomic_path, atomic_write  # noqa: F401  (re-exported: the commands write through these)
 
 
 def say(msg: str) -> None:

@@ -10,14 +10,16 @@ import tempfile
 
 import numpy as np
 
-from .. import dataset
-from ..validate import calibrate as cal
-from ..validate import plots, report
-from ..validate.cornersets import dataset_methods
-from ..validate.detection import detect_dataset as _detect_dataset
-from ..validate.detection import split_interleaved
-from ..validate.sources import SourceError, load_corner_set, load_model
-from .common import HelpFormatter, Progress, exit_status_help, atomic_write, make_folder, run, say
+from rotstar_mrcal import dataset
+from rotstar_mrcal.calibrate import solve as cal
+from rotstar_mrcal.report import plots, page as report
+from rotstar_mrcal.peers.cornersets import dataset_methods
+from rotstar_mrcal.evaluate.detection import detect_dataset as _detect_dataset
+from rotstar_mrcal.evaluate.detection import split_interleaved
+from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set, load_model
+from rotstar_mrcal.cli.common import (
+    HelpFormatter, Progress, exit_status_help, atomic_write, make_folder, run, say,
+)
 
 DESCRIPTION = """\
 Validate calibrations the way the rotating-star paper and mrcal do it.
@@ -121,7 +123,7 @@ def detect_commands(seq: str, methods, outdir: str, side: str) -> list[str]:
         >>> detect_commands("seq", ["rotstar", "mrgingham"], "xval", "A")
         ['rotstar-detect seq --method rotstar -o xval/rotstar/A.vnl']
     """
-    from .detect import DETECT_METHODS
+    from rotstar_mrcal.cli.detect import DETECT_METHODS
 
     return [cal.command_line(["rotstar-detect", seq, "--method", m, "-o", os.path.join(outdir, m, f"{side}.vnl")])
             for m in methods if m in DETECT_METHODS]
@@ -158,7 +160,7 @@ def mode_heldout(a, model_path: str, test: str) -> int:
 
 
 def _heldout_report(a, model, model_path, test, vnl) -> int:
-    from ..validate.heldout import heldout
+    from rotstar_mrcal.evaluate.heldout import heldout
 
     cs = load_corner_set(vnl, a.pattern, a.imagersize, truth=False)
     if tuple(int(v) for v in model.imagersize()) != tuple(cs.imagersize):
@@ -185,7 +187,7 @@ def _heldout_report(a, model, model_path, test, vnl) -> int:
 def mode_models(a, path_a: str, path_b: str) -> int:
     import matplotlib.pyplot as plt
 
-    from ..validate.crossval import cross_validate
+    from rotstar_mrcal.evaluate.crossval import cross_validate
 
     ma, mb = load_model(path_a, True), load_model(path_b, True)
     cv = cross_validate(ma, mb, gridn_width=a.gridn, distance=a.distance)
@@ -209,7 +211,7 @@ def mode_models(a, path_a: str, path_b: str) -> int:
 
 def mode_sets(a, sets: dict) -> int:
     """sets: {name: (vnl A, vnl B)}"""
-    from ..validate.groups import compare_sets
+    from rotstar_mrcal.evaluate.groups import compare_sets
 
     progress = Progress(3 * len(sets))  # two calibrations and one evaluation per set
     c = compare_sets(sets, a.outdir, a.lensmodel, a.knots_x, a.pattern, a.imagersize, a.gridn, a.distance, a.jobs,
@@ -253,7 +255,7 @@ def _main(argv=None) -> int:
             va, vb = (os.path.join(a.outdir, "rotstar", f"{s}.vnl") for s in "AB")
             na, nb = split_interleaved(vnl, va, vb)
             say(f"rotstar-crossval: split {vnl} into {va} ({na} boards) and {vb} ({nb} boards), interleaved")
-            from ..validate.groups import default_label
+            from rotstar_mrcal.evaluate.groups import default_label
 
             a.label = a.label or default_label(a.inputs[0], a.inputs[0])  # the recording's name
             a.inputs = []

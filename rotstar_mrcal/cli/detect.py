@@ -6,15 +6,17 @@ import argparse
 import os
 import sys
 
-from .. import dataset
-from ..detect.display import MAX_MOTION
-from ..detect.labelled import MIN_WINDOW
-from ..methods import METHODS, REFINERS
-from ..detect.run import detect_dataset
-from ..focal import estimate_focal
-from ..vnl import write_corners
-from .common import (EXIT_FAILED, HelpFormatter, exit_status_help, Progress, atomic_write, check_output_path, fail, number_arg, run,
-                     say)
+from rotstar_mrcal import dataset
+from rotstar_mrcal.detect.display_offsets import MAX_MOTION
+from rotstar_mrcal.detect.elements import MIN_WINDOW
+from rotstar_mrcal.peers.registry import METHODS, REFINERS
+from rotstar_mrcal.detect.run import detect_dataset
+from rotstar_mrcal.calibrate.focal import estimate_focal
+from rotstar_mrcal.vnl import write_corners
+from rotstar_mrcal.cli.common import (
+    EXIT_FAILED, HelpFormatter, exit_status_help, Progress, atomic_write, check_output_path, fail,
+    number_arg, run, say,
+)
 
 DESCRIPTION = """\
 Detect the corners of every pose of a recorded rotating-star dataset and write
@@ -82,7 +84,7 @@ def parse_args(argv=None):
 
 def mrcal_command(layout, imagersize, focal, vnl_name, glob, weights=False) -> str:
     """The mrcal-calibrate-cameras command to run next: rotstar-calibrate's lean model, one builder"""
-    from ..validate.calibrate import hint_command
+    from rotstar_mrcal.calibrate.solve import hint_command
 
     return hint_command(layout, imagersize, focal, vnl_name, glob, weights)
 
@@ -142,7 +144,7 @@ def fall_back_to_rotstar(a) -> bool:
     is 1 (the method asked for did not run), and the message says which
     corners the output holds.
     """
-    from ..detect.run import missing_frames
+    from rotstar_mrcal.detect.run import missing_frames
 
     if a.method == "rotstar":
         return False
@@ -171,7 +173,7 @@ def _main(argv=None) -> int:
         if r.found:
             why = ""
             if a.method != "rotstar" and r.corners.reasons is not None and r.corners.n_valid < layout.nx * layout.ny:
-                from ..methods import reason_counts
+                from rotstar_mrcal.peers.registry import reason_counts
 
                 why = f" ({a.method}: {reason_counts(r.corners.reasons)})"
             elif r.corners.n_valid < layout.nx * layout.ny:
@@ -233,10 +235,10 @@ def _main(argv=None) -> int:
 
 def _main_rig(a) -> int:
     """rotstar-detect on a multi-camera dataset (detect.rig)"""
-    from ..detect.rig import detect_rig
-    from ..validate.rig import rig_argv, rig_globs
-    from ..validate.calibrate import LEAN_LENSMODEL, command_line
-    from ..vnl import mrcal_keeps
+    from rotstar_mrcal.detect.rig import detect_rig
+    from rotstar_mrcal.calibrate.rig import rig_argv, rig_globs
+    from rotstar_mrcal.calibrate.solve import LEAN_LENSMODEL, command_line
+    from rotstar_mrcal.vnl import mrcal_keeps
 
     try:
         pattern, layout = dataset.read_pattern(a.seq)

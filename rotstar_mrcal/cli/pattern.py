@@ -9,11 +9,13 @@ import sys
 
 import cv2
 
-from ..display.player import write_player
-from ..pattern.layout import make_layout
-from ..pattern.render import encode_display, render_frame
-from .common import EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, exit_status_help, fail, \
-    make_folder, number_arg, run, say, size_arg
+from rotstar_mrcal.pattern.player import write_player
+from rotstar_mrcal.pattern.layout import make_layout
+from rotstar_mrcal.pattern.render import encode_display, render_frame
+from rotstar_mrcal.cli.common import (
+    EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, exit_status_help, fail,
+    make_folder, number_arg, run, say, size_arg,
+)
 
 DESCRIPTION = """\
 Write the rotating-star display sequence for one screen: NFRAMES frames in

@@ -7,8 +7,8 @@ import json
 import os
 import sys
 
-from ..validate import reportdir
-from .common import EXIT_FAILED, HelpFormatter, exit_status_help, fail, make_folder, run, say
+from rotstar_mrcal.report import folder as reportdir
+from rotstar_mrcal.cli.common import EXIT_FAILED, HelpFormatter, exit_status_help, fail, make_folder, run, say
 
 DESCRIPTION = """\
 Build the validation report from one or more rotstar-crossval output folders
@@ -34,7 +34,7 @@ On simulated data (the truth gives each test pose's tilt) it also writes
 OUT/paper.md with the held-out error by tilt of the test poses; when the run
 compares the paper's patterns (rotstar with the star or phase shifting, as
 make demo does), paper.md and the page also state the paper's real-world
-claims (4.2) as verdicts with their numbers (rotstar_mrcal.validate.claims).
+claims (4.2) as verdicts with their numbers (rotstar_lab.claims).
 
 stdout: the headline table and the verdict (Markdown), for pasting, and the
 paper's claims in one line each when they apply;

@@ -11,16 +11,18 @@ import sys
 
 import numpy as np
 
-from .. import dataset
-from ..capture.backend_replay import ReplaySource, stereo_raw
-from ..capture.pose import quick_check, value_scale, write_segmented
-from ..capture.rig_segment import check_recordings, segment_rig
-from ..capture.segment import SegmentError, segment
-from ..capture.source import CaptureError
-from .segment_args import add_segment_options, options_from
-from ..atomic import whole_or_none
-from .common import (EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, exit_status_help, fail,
-                     out_line, run, say, size_arg)
+from rotstar_mrcal import dataset
+from rotstar_mrcal.capture.backend_replay import ReplaySource, stereo_raw
+from rotstar_mrcal.capture.pose import quick_check, value_scale, write_segmented
+from rotstar_mrcal.capture.rig_segment import check_recordings, segment_rig
+from rotstar_mrcal.capture.segment import SegmentError, segment
+from rotstar_mrcal.capture.source import CaptureError
+from rotstar_mrcal.cli.segment_args import add_segment_options, options_from
+from rotstar_mrcal.atomic import whole_or_none
+from rotstar_mrcal.cli.common import (
+    EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, exit_status_help, fail,
+    out_line, run, say, size_arg,
+)
 
 DESCRIPTION = """\
 Split a continuous recording of player.html (the start marker, then every

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..capture.segment import Options
+from rotstar_mrcal.capture.segment import Options
 
 
 def _scale(s: str):

@@ -30,20 +30,22 @@ import sys
 import mrcal
 import numpy as np
 
-from ..dataset import DatasetError, read_pattern
-from ..pattern.layout import make_layout
+from rotstar_mrcal.dataset import DatasetError, read_pattern
+from rotstar_mrcal.pattern.layout import make_layout
 
 PAPER_SEQUENCE = dict(phase_period=150, star_segments=16)  # rotstar-pattern --paper-sequence's defaults (pitch 150)
-from ..simulate.camera import PRESETS, preset_model
-from ..simulate.dataset import Settings, write_dataset
-from ..simulate.poses import default_distance_range, random_poses
-from ..optics import TERMS, LensPSF, Seidel
-from ..simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_dataset
-from ..simulate.screen import exact_frames, png_frames, shown_light
-from ..capture.simulated import write_player_recording
-from ..display.player import DEFAULT_HOLD
-from .common import EXIT_CODES_HELP, EXIT_FAILED, HelpFormatter, check_output_path, fail, number_arg, \
-    out_line, run
+from rotstar_mrcal.simulate.camera import PRESETS, preset_model
+from rotstar_mrcal.simulate.dataset import Settings, write_dataset
+from rotstar_mrcal.simulate.poses import default_distance_range, random_poses
+from rotstar_mrcal.optics.wavefront import TERMS, Seidel
+from rotstar_mrcal.optics.psf import LensPSF
+from rotstar_mrcal.simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_dataset
+from rotstar_mrcal.simulate.screen import exact_frames, png_frames, shown_light
+from rotstar_mrcal.capture.simulated import write_player_recording
+from rotstar_mrcal.pattern.player import DEFAULT_HOLD
+from rotstar_mrcal.cli.common import (
+    EXIT_CODES_HELP, EXIT_FAILED, HelpFormatter, check_output_path, fail, number_arg, out_line, run,
+)
 
 DESCRIPTION = """\
 Render a synthetic dataset: the rotating-star screen seen by a camera at

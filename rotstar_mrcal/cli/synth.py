@@ -27,7 +27,10 @@ import time
 
 import numpy as np
 
-from .common import HelpFormatter, exit_status_help, atomic_path, atomic_write, check_output_path, fail, number_arg, run, say
+from rotstar_mrcal.cli.common import (
+    HelpFormatter, exit_status_help, atomic_path, atomic_write, check_output_path, fail, number_arg, run,
+    say,
+)
 
 
 def _floats(xs):
@@ -46,9 +49,9 @@ def _amplitudes(items):
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    from ..synth.experiment import ABERRATIONS, Protocol
-    from ..synth.patterns import PATTERNS
-    from ..synth.refiners import REFINERS
+    from rotstar_mrcal.synth.experiment import ABERRATIONS, Protocol
+    from rotstar_mrcal.synth.patterns import PATTERNS
+    from rotstar_mrcal.synth.refiners import REFINERS
 
     d = Protocol()
     p = argparse.ArgumentParser(prog="rotstar-synth", description=__doc__.split("\n\n")[0].split(": ", 1)[1],
@@ -113,8 +116,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def protocol_from(args, given: set):
-    from ..optics.psf import Optics
-    from ..synth.experiment import Protocol, quick_protocol
+    from rotstar_mrcal.optics.psf import Optics
+    from rotstar_mrcal.synth.experiment import Protocol, quick_protocol
 
     base = quick_protocol() if getattr(args, "quick", False) else Protocol()
     kw = dict(aberrations=tuple(args.aberrations), amplitudes=_amplitudes(args.amplitude),
@@ -165,9 +168,9 @@ def cmd_experiment(args, given) -> int:
     import matplotlib
 
     matplotlib.use("Agg")
-    from ..synth import plots, table, verdicts
-    from ..synth.refiners import applies
-    from ..synth.sweep import pending_tasks, run_sweep
+    from rotstar_mrcal.synth import plots, table, verdicts
+    from rotstar_mrcal.synth.refiners import applies
+    from rotstar_mrcal.synth.sweep import pending_tasks, run_sweep
 
     protocol = protocol_from(args, given)
     pairs = sum(applies(a, r) for a in protocol.patterns for r in protocol.refiners)
@@ -222,7 +225,7 @@ def cmd_experiment(args, given) -> int:
 
 
 def summary_markdown(protocol, mean_rows, vs, wall, args, figures) -> str:
-    from ..synth import table, verdicts
+    from rotstar_mrcal.synth import table, verdicts
 
     p = protocol
     cmd = "rotstar-synth " + " ".join(sys.argv[1:]) if sys.argv and "synth" in sys.argv[0] else "rotstar-synth experiment"
@@ -279,8 +282,8 @@ def _psf_text(spec) -> str:
 
 
 def cmd_psf(args, given) -> int:
-    from ..optics.psf import asymmetry, centroid_px, second_moment_px
-    from ..synth.experiment import psf_kernel
+    from rotstar_mrcal.optics.psf import asymmetry, centroid_px, second_moment_px
+    from rotstar_mrcal.synth.experiment import psf_kernel
 
     p = protocol_from(args, given)
     s = p.supersample
@@ -299,9 +302,9 @@ def cmd_psf(args, given) -> int:
 
 
 def cmd_bound(args, given) -> int:
-    from ..optics.crlb import closed_form_corner_bound
-    from ..optics.psf import gaussian_psf
-    from ..synth.bound import pattern_bounds
+    from rotstar_mrcal.optics.crlb import closed_form_corner_bound
+    from rotstar_mrcal.optics.psf import gaussian_psf
+    from rotstar_mrcal.synth.bound import pattern_bounds
 
     print(f"# per-axis CRLB std (px), contrast 200 DN, sigma_n {args.noise:g} DN, half-window {args.window}, head-on")
     print("# sigma_b  checkerboard  closed_form  rotstar_8_frames  star16  phase_8_frames")

@@ -1,4 +1,4 @@
-"""Element identities: the identity frames name every element in view (issue 13)
+"""Element identities: the identity frames name every element in view (codes in time, beside the paper's graph)
 
 SYNOPSIS
 
@@ -39,9 +39,9 @@ import dataclasses
 import cv2
 import numpy as np
 
-from ..pattern.identity import MISORDER_READ, IdentityCode
-from .boundaries import inscribed_square, on_border
-from .response import pixel_noise
+from rotstar_mrcal.pattern.identity import MISORDER_READ, IdentityCode
+from rotstar_mrcal.detect.boundaries import inscribed_square, on_border
+from rotstar_mrcal.detect.response import pixel_noise
 
 MAP_THRESHOLD = 0.7
 SPLIT_THRESHOLD = 0.85  # inside regions whose code is unreadable: the bands closed by blur or saturation

@@ -74,7 +74,7 @@ def contact_graph(contours: list, shape: tuple[int, int], lattice: np.ndarray | 
     (such as the paper's bounding-rectangle vertex distance) this holds
     under shear, steep perspective and blur.
     """
-    from .nearest import knn_third_party, nearest_label  # scipy's EDT and k-d tree answers, without importing scipy
+    from rotstar_mrcal.detect.nearest import knn_third_party, nearest_label  # scipy's EDT and k-d tree answers, without importing scipy
 
     N = len(contours)
     if N == 0:

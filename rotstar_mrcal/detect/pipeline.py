@@ -65,14 +65,16 @@ import dataclasses
 
 import numpy as np
 
-from ..methods import refiner
-from ..pattern.layout import Layout
-from .consistency import refined_consistency
-from .display import MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian
-from .labelled import by_graph, by_identity
-from .refine import refine_each_frame, symmetric_refine
-from .response import pixel_noise
-from .sequence import check_band_parity
+from rotstar_mrcal.peers.registry import refiner
+from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.detect.consistency import refined_consistency
+from rotstar_mrcal.detect.display_offsets import (
+    MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian,
+)
+from rotstar_mrcal.detect.elements import by_graph, by_identity
+from rotstar_mrcal.detect.refine import refine_each_frame, symmetric_refine
+from rotstar_mrcal.detect.response import pixel_noise
+from rotstar_mrcal.detect.sequence import check_band_parity
 
 
 @dataclasses.dataclass

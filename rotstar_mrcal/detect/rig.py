@@ -39,10 +39,10 @@ import math
 
 import numpy as np
 
-from .. import dataset
-from ..vnl import mrcal_can_read
-from .display import MAX_MOTION
-from .run import DatasetCorners, PoseResult, detect_dataset
+from rotstar_mrcal import dataset
+from rotstar_mrcal.vnl import mrcal_can_read
+from rotstar_mrcal.detect.display_offsets import MAX_MOTION
+from rotstar_mrcal.detect.run import DatasetCorners, PoseResult, detect_dataset
 
 MAX_TURN_DEG = 30.0
 """Largest angle between the board-x directions of one board in two cameras' images"""

@@ -25,7 +25,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .boundaries import inscribed_square
+from rotstar_mrcal.detect.boundaries import inscribed_square
 
 MAX_POINTS = 64
 RANSAC_HYPOTHESES = 16

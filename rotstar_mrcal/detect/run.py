@@ -26,12 +26,12 @@ import os
 
 import numpy as np
 
-from .. import dataset
-from ..parallel import process_map
-from ..pattern.layout import Layout
-from ..vnl import mrcal_can_read
-from .display import MAX_MOTION, DisplayCheck, dataset_offsets
-from .pipeline import PoseCorners, detect_pose
+from rotstar_mrcal import dataset
+from rotstar_mrcal.parallel import process_map
+from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.vnl import mrcal_can_read
+from rotstar_mrcal.detect.display_offsets import MAX_MOTION, DisplayCheck, dataset_offsets
+from rotstar_mrcal.detect.pipeline import PoseCorners, detect_pose
 
 
 @dataclasses.dataclass
@@ -103,7 +103,7 @@ def started_from_rotstar(name: str, r: PoseCorners, p: dataset.Pose, layout: Lay
     dataset's motion check), and has the method's per-corner reasons; no
     covariance (--weights are rotstar's).
     """
-    from ..methods import PoseImages, method
+    from rotstar_mrcal.peers.registry import PoseImages, method
 
     f = method(name)(PoseImages(layout, p.full_scale, frames=p.rotstar, identity=p.identity,
                                 checkerboard=p.checkerboard, phase=p.phase, star=p.star,
@@ -123,7 +123,7 @@ def missing_frames(layout: Layout, name: str) -> str:
     >>> missing_frames(plain, "phase"), missing_frames(plain, "saddle")
     ('phase-shift frames', '')
     """
-    from ..methods import method
+    from rotstar_mrcal.peers.registry import method
 
     needs = method(name).needs
     if needs == "phase" and not layout.phase:
@@ -140,7 +140,7 @@ def method_available(layout: Layout, name: str) -> str:
     >>> method_available(make_layout(screen=(800, 600), pitch=100, band=24), "star")[:48]
     'the sequence has no star frame (it was recorded '
     """
-    from ..methods import method
+    from rotstar_mrcal.peers.registry import method
 
     m = method(name)
     what = missing_frames(layout, name)

@@ -2,7 +2,8 @@
 
 SYNOPSIS
 
-    >>> from rotstar_mrcal.optics import Seidel, Optics, wavefront_psf, asymmetry
+    >>> from rotstar_mrcal.optics.wavefront import Seidel
+    >>> from rotstar_mrcal.optics.psf import Optics, wavefront_psf, asymmetry
     >>> k = wavefront_psf(Seidel(coma=4.0), Optics(), supersample=4)
     >>> asymmetry(k) > 0.2, asymmetry(wavefront_psf(Seidel(spherical=2.0), Optics(), 4)) < 1e-9
     (True, True)
@@ -17,20 +18,12 @@ Modules, one concept each:
 See doc/optics.md.
 """
 
-from .crlb import closed_form_corner_bound, crlb_cov, crlb_rms, fisher_information
-from .psf import (
-    LensPSF,
-    Optics,
-    SeidelPSF,
-    asymmetry,
-    centroid_px,
-    gaussian_psf,
-    geometric_radius_px,
-    radial_psf,
-    second_moment_px,
-    wavefront_psf,
+from rotstar_mrcal.optics.crlb import closed_form_corner_bound, crlb_cov, crlb_rms, fisher_information
+from rotstar_mrcal.optics.psf import (
+    LensPSF, Optics, SeidelPSF, asymmetry, centroid_px, gaussian_psf, geometric_radius_px, radial_psf,
+    second_moment_px, wavefront_psf,
 )
-from .wavefront import TERMS, Seidel, pupil_function, wavefront
+from rotstar_mrcal.optics.wavefront import TERMS, Seidel, pupil_function, wavefront
 
 __all__ = [
     "Seidel", "TERMS", "wavefront", "pupil_function",

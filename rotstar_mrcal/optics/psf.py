@@ -3,7 +3,8 @@
 SYNOPSIS
 
     >>> import numpy as np
-    >>> from rotstar_mrcal.optics import Optics, Seidel, wavefront_psf
+    >>> from rotstar_mrcal.optics.psf import Optics, wavefront_psf
+    >>> from rotstar_mrcal.optics.wavefront import Seidel
     >>> optics = Optics(wavelength_um=0.55, fnumber=2.0, pixel_um=3.0)
     >>> round(optics.lambda_fnum_px, 4)                  # lambda N / pixel pitch
     0.3667
@@ -46,8 +47,8 @@ import math
 
 import numpy as np
 
-from ..simulate.optics import TiledPSF, convolve
-from .wavefront import Seidel, pupil_function
+from rotstar_mrcal.simulate.blur import TiledPSF, convolve
+from rotstar_mrcal.optics.wavefront import Seidel, pupil_function
 
 DEFAULT_TAIL = 2e-3
 """Energy fraction allowed outside the cropped kernel"""
@@ -199,7 +200,8 @@ class SeidelPSF:
     SYNOPSIS
 
         >>> import numpy as np
-        >>> from rotstar_mrcal.optics import SeidelPSF, Seidel
+        >>> from rotstar_mrcal.optics.psf import SeidelPSF
+        >>> from rotstar_mrcal.optics.wavefront import Seidel
         >>> psf = SeidelPSF(Seidel(spherical=1.0))
         >>> img = np.zeros((1, 81, 81), np.float32); img[0, 40, 40] = 1
         >>> out = psf(img, (0, 0), 4)
@@ -239,7 +241,8 @@ def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, tile_px: in
     SYNOPSIS
 
         >>> import numpy as np
-        >>> from rotstar_mrcal.optics import Seidel, radial_psf
+        >>> from rotstar_mrcal.optics.wavefront import Seidel
+        >>> from rotstar_mrcal.optics.psf import radial_psf
         >>> psf = radial_psf(Seidel(coma=2.0), centre=(64, 64), tile_px=32)
         >>> out = psf(np.ones((1, 512, 512), np.float32), (0, 0), 4)
         >>> bool(np.allclose(out, 1, atol=1e-5))          # flat stays flat
@@ -286,7 +289,8 @@ class LensPSF:
     SYNOPSIS
 
         >>> import numpy as np
-        >>> from rotstar_mrcal.optics import LensPSF, Seidel
+        >>> from rotstar_mrcal.optics.psf import LensPSF
+        >>> from rotstar_mrcal.optics.wavefront import Seidel
         >>> psf = LensPSF(Seidel(coma=1.5, focus=0.3), (128, 96))     # waves at the image corners
         >>> psf.seidel.tilt                                           # coma's centroid put back
         -1.5
@@ -301,7 +305,7 @@ class LensPSF:
     and astigmatism point along the field radius (radial_psf). Coma moves
     the light's centroid off the chief ray; unless `tilt` is given, an
     equal and opposite tilt (tilt = -coma) puts it back, so the true camera
-    model is where the light's centroid lands (what rotstar_mrcal.demo does).
+    model is where the light's centroid lands (what rotstar_lab.demo does).
     """
 
     def __init__(self, seidel: Seidel, imagersize, optics: Optics | None = None, tile_px: int = 64,

@@ -122,7 +122,7 @@ class Layout:
     @property
     def identity_code(self):
         """The IdentityCode of this grid, or None without identity frames"""
-        from .identity import IdentityCode
+        from rotstar_mrcal.pattern.identity import IdentityCode
 
         return IdentityCode.for_grid(self.nx, self.ny) if self.identity else None
 
@@ -308,7 +308,7 @@ def make_layout(
     if nx > fit_x or ny > fit_y:
         raise ValueError(f"{nx}x{ny} corners at pitch {pitch} do not fit on a {W}x{H} screen (at most {fit_x}x{fit_y})")
     if identity:
-        from .identity import IdentityCode
+        from rotstar_mrcal.pattern.identity import IdentityCode
 
         try:
             IdentityCode.for_grid(nx, ny)
@@ -402,7 +402,7 @@ def _check_frames(frames) -> int:
 
 def _check_identity(d: dict, nx: int, ny: int) -> bool:
     """Whether pattern.json lists identity frames; ValueError when they do not match the grid's code"""
-    from .identity import code_from_dict
+    from rotstar_mrcal.pattern.identity import code_from_dict
 
     idx = [f.get("index") for f in d["frames"] if f["kind"] == "identity"]
     if not idx and "identity" not in d:

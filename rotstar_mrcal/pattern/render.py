@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import Layout
+from rotstar_mrcal.pattern.layout import Layout
 
 CENTRE_SUPERSAMPLING = 64
 
@@ -154,7 +154,7 @@ def phase_profile(layout: Layout, axis: str, step: int, length: int) -> np.ndarr
         >>> np.round(phi[x0 - 1 : x0 + 1] * 100 / (2 * np.pi), 6).tolist()   # +-0.5 px from phase 0
         [-0.5, 0.5]
     """
-    from .layout import PHASE_STEPS
+    from rotstar_mrcal.pattern.layout import PHASE_STEPS
 
     o = layout.phase_zero[0 if axis == "x" else 1]
     phi = 2 * np.pi * (np.arange(length) + 0.5 - o) / layout.phase_period

@@ -30,13 +30,17 @@ Modules, one concept each:
 See doc/simulator.md.
 """
 
-from .camera import PRESETS, RayGrid, camera_rays, fov_deg, preset_model
-from .dataset import Settings, Truth, load_truth, pose_names, render_pose, true_corners, write_dataset
-from .exposure import expose, full_scale_code
-from .optics import GaussianPSF, KernelPSF, TiledPSF, as_psf, gaussian_kernel
-from .poses import default_distance_range, hanging_poses, look_at_pose, pose_ok, random_poses, tilt_angle
-from .irradiance import render_irradiance
-from .screen import Screen, exact_frames, make_screen, png_frames, shown_light
+from rotstar_mrcal.simulate.camera import PRESETS, RayGrid, camera_rays, fov_deg, preset_model
+from rotstar_mrcal.simulate.dataset import (
+    Settings, Truth, load_truth, pose_names, render_pose, true_corners, write_dataset,
+)
+from rotstar_mrcal.simulate.exposure import expose, full_scale_code
+from rotstar_mrcal.simulate.blur import GaussianPSF, KernelPSF, TiledPSF, as_psf, gaussian_kernel
+from rotstar_mrcal.simulate.poses import (
+    default_distance_range, hanging_poses, look_at_pose, pose_ok, random_poses, tilt_angle,
+)
+from rotstar_mrcal.simulate.irradiance import render_irradiance
+from rotstar_mrcal.simulate.screen import Screen, exact_frames, make_screen, png_frames, shown_light
 
 __all__ = [
     "PRESETS", "RayGrid", "camera_rays", "fov_deg", "preset_model",

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..detect.baselines import average_frames
+from rotstar_mrcal.peers.checkerboard import average_frames
 
 
 def averaged_captures(irradiance: np.ndarray, expose, n: int = 8, roi=None) -> np.ndarray:

@@ -53,14 +53,14 @@ import time
 import mrcal
 import numpy as np
 
-from .. import dataset as ds
-from ..parallel import process_map
-from ..pattern.layout import Layout
-from .camera import RayGrid, camera_rays, remember_rays
-from .exposure import expose
-from .optics import describe_psf
-from .irradiance import render_irradiance
-from .screen import Screen, exact_frames, make_screen
+from rotstar_mrcal import dataset as ds
+from rotstar_mrcal.parallel import process_map
+from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.simulate.camera import RayGrid, camera_rays, remember_rays
+from rotstar_mrcal.simulate.exposure import expose
+from rotstar_mrcal.simulate.blur import describe_psf
+from rotstar_mrcal.simulate.irradiance import render_irradiance
+from rotstar_mrcal.simulate.screen import Screen, exact_frames, make_screen
 
 TRUTH_FORMAT = "rotstar-truth/1"
 

@@ -54,9 +54,9 @@ import mrcal
 import numpy as np
 import scipy.sparse
 
-from .camera import RayGrid, camera_rays, subpixel_rays
-from .optics import as_psf, psf_radius
-from .screen import Screen
+from rotstar_mrcal.simulate.camera import RayGrid, camera_rays, subpixel_rays
+from rotstar_mrcal.simulate.blur import as_psf, psf_radius
+from rotstar_mrcal.simulate.screen import Screen
 
 MIN_BOX = 1e-3
 """Smallest box side in display pixels (area sampling where the footprint is unknown)"""

@@ -66,9 +66,9 @@ import math
 import mrcal
 import numpy as np
 
-from ..pattern.layout import Layout, make_layout
-from .screen import screen_to_board
-from .visibility import in_view as in_view_mask
+from rotstar_mrcal.pattern.layout import Layout, make_layout
+from rotstar_mrcal.simulate.screen import screen_to_board
+from rotstar_mrcal.simulate.visibility import in_view as in_view_mask
 
 HANG_INSET = 0.25  # the centre of a hanging board: at most this fraction of the image size inside an edge
 

@@ -68,15 +68,17 @@ import time
 import mrcal
 import numpy as np
 
-from .. import dataset as ds
-from ..parallel import process_map
-from ..pattern.layout import Layout
-from .camera import camera_rays, preset_model
-from .dataset import Settings, _do_pose, _setup, _STATE, read_truth_json, true_corners, write_truth_json
-from ..optics import LensPSF
-from .optics import describe_psf
-from .poses import pose_ok, random_poses
-from .screen import exact_frames
+from rotstar_mrcal import dataset as ds
+from rotstar_mrcal.parallel import process_map
+from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.simulate.camera import camera_rays, preset_model
+from rotstar_mrcal.simulate.dataset import (
+    Settings, _do_pose, _setup, _STATE, read_truth_json, true_corners, write_truth_json,
+)
+from rotstar_mrcal.optics.psf import LensPSF
+from rotstar_mrcal.simulate.blur import describe_psf
+from rotstar_mrcal.simulate.poses import pose_ok, random_poses
+from rotstar_mrcal.simulate.screen import exact_frames
 
 RIG_TRUTH_FORMAT = "rotstar-rig-truth/1"
 
@@ -176,7 +178,7 @@ def rig_cameras(name: str = "d435", seed: int = 0, rgb: bool = False, blur_px: f
 def scaled_seidel(seidel, scale: float):
     """The Seidel amplitudes (waves) times scale, their directions kept
 
-        >>> from rotstar_mrcal.optics import Seidel
+        >>> from rotstar_mrcal.optics.wavefront import Seidel
         >>> scaled_seidel(Seidel(coma=1.5, focus=0.3), 0.9).coma
         1.35
     """

@@ -37,8 +37,8 @@ import os
 import cv2
 import numpy as np
 
-from ..pattern.layout import Layout
-from ..pattern.render import decode_display, encode_display, render_frame
+from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.pattern.render import decode_display, encode_display, render_frame
 
 
 @dataclasses.dataclass(frozen=True)

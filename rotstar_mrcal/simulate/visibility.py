@@ -43,8 +43,8 @@ import math
 import mrcal
 import numpy as np
 
-from ..detect.labelled import MIN_WINDOW, WINDOW_FRACTION
-from ..pattern.layout import Layout
+from rotstar_mrcal.detect.elements import MIN_WINDOW, WINDOW_FRACTION
+from rotstar_mrcal.pattern.layout import Layout
 
 POINTS_PER_SIDE = 8  # points per side of an element's square, projected to find its inscribed square
 DEFAULT_WINDOW = 10.0  # the detector's default cap, px (detect_pose(window=))

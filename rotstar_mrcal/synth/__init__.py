@@ -2,7 +2,8 @@
 
 SYNOPSIS
 
-    >>> from rotstar_mrcal.synth import quick_protocol, run_task, tabulate, over_tilts
+    >>> from rotstar_mrcal.synth.experiment import quick_protocol, run_task
+    >>> from rotstar_mrcal.synth.table import tabulate, over_tilts
     >>> from rotstar_mrcal.synth.verdicts import verdicts
     >>> p = quick_protocol(phis_deg=(40,), alphas_deg=(0, 60, 120), repeats=2, noises=(0.0,),
     ...                    patterns=("checkerboard", "rotstar"), refiners=("symmetric",))
@@ -33,13 +34,15 @@ Modules, one concept each:
 The command line is rotstar-synth (rotstar_mrcal.cli.synth); see doc/optics.md.
 """
 
-from . import verdicts
-from .experiment import ABERRATIONS, SYMMETRIC, Protocol, psf_kernel, quick_protocol, render_views, run_task
-from .metrics import failure_rate, pairwise_range, rms_error
-from .patterns import PATTERNS, Fringe, Star, pattern_frames, phase_frames
-from .refiners import REFINERS, applies, refine
-from .sweep import pending_tasks, run_sweep
-from .table import over_tilts, tabulate
+from rotstar_mrcal.synth import verdicts
+from rotstar_mrcal.synth.experiment import (
+    ABERRATIONS, SYMMETRIC, Protocol, psf_kernel, quick_protocol, render_views, run_task,
+)
+from rotstar_mrcal.synth.metrics import failure_rate, pairwise_range, rms_error
+from rotstar_mrcal.synth.patterns import PATTERNS, Fringe, Star, pattern_frames, phase_frames
+from rotstar_mrcal.synth.refiners import REFINERS, applies, refine
+from rotstar_mrcal.synth.sweep import pending_tasks, run_sweep
+from rotstar_mrcal.synth.table import over_tilts, tabulate
 
 __all__ = [
     "ABERRATIONS", "SYMMETRIC", "Protocol", "psf_kernel", "quick_protocol", "render_views", "run_task",

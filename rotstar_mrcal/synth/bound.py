@@ -2,7 +2,8 @@
 
 SYNOPSIS
 
-    >>> from rotstar_mrcal.optics import gaussian_psf, closed_form_corner_bound
+    >>> from rotstar_mrcal.optics.psf import gaussian_psf
+    >>> from rotstar_mrcal.optics.crlb import closed_form_corner_bound
     >>> from rotstar_mrcal.synth.bound import pattern_bounds
     >>> b = pattern_bounds(gaussian_psf(1.0, 4), 4, window=10, contrast=200.0, sigma_n=2.0)
     >>> round(b["checkerboard"], 4), round(closed_form_corner_bound(2.0, 200.0, 1.0, 10), 4)
@@ -27,9 +28,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..optics.crlb import crlb_cov, fisher_information
-from .patterns import PATTERNS, PHASE_PERIOD, pattern_frames
-from .imaging import ViewRenderer
+from rotstar_mrcal.optics.crlb import crlb_cov, fisher_information
+from rotstar_mrcal.synth.patterns import PATTERNS, PHASE_PERIOD, pattern_frames
+from rotstar_mrcal.synth.imaging import ViewRenderer
 
 
 def pattern_bounds(kernel, s: int, window: int = 10, contrast: float = 200.0, sigma_n: float = 2.0,

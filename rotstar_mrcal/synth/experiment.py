@@ -63,14 +63,14 @@ import zlib
 
 import numpy as np
 
-from ..detect.baselines import average_frames
-from ..optics.crlb import fisher_information
-from ..optics.psf import Optics, gaussian_psf, wavefront_psf
-from ..optics.wavefront import Seidel
-from .patterns import PATTERNS, PHASE_PERIOD, pattern_frames
-from .refiners import REFINERS, applies, refine
-from .imaging import ViewRenderer
-from .views import ALPHAS_DEG, PHIS_DEG, view_jacobian
+from rotstar_mrcal.peers.checkerboard import average_frames
+from rotstar_mrcal.optics.crlb import fisher_information
+from rotstar_mrcal.optics.psf import Optics, gaussian_psf, wavefront_psf
+from rotstar_mrcal.optics.wavefront import Seidel
+from rotstar_mrcal.synth.patterns import PATTERNS, PHASE_PERIOD, pattern_frames
+from rotstar_mrcal.synth.refiners import REFINERS, applies, refine
+from rotstar_mrcal.synth.imaging import ViewRenderer
+from rotstar_mrcal.synth.views import ALPHAS_DEG, PHIS_DEG, view_jacobian
 
 ABERRATIONS = {
     # name: (Seidel term, default amplitude in waves); "none" is the Gaussian

@@ -5,7 +5,7 @@ SYNOPSIS
     >>> import numpy as np
     >>> from rotstar_mrcal.synth.patterns import Star
     >>> from rotstar_mrcal.synth.imaging import render_view
-    >>> from rotstar_mrcal.optics import gaussian_psf
+    >>> from rotstar_mrcal.optics.psf import gaussian_psf
     >>> apex = np.array((10.0, 10.0))                      # the corner, tile pixels
     >>> img, grad = render_view([Star.regular(4, 0.3)], gaussian_psf(1.0, 4), 4, 21, apex)
     >>> img.shape, grad.shape                              # (frames, T, T), (frames, T, T, 2)
@@ -58,8 +58,8 @@ import numpy as np
 
 import scipy.fft
 
-from ..simulate.irradiance import block_average
-from .patterns import Fringe, Star
+from rotstar_mrcal.simulate.irradiance import block_average
+from rotstar_mrcal.synth.patterns import Fringe, Star
 
 
 def star_coverage(star: Star, dx: np.ndarray, dy: np.ndarray, h: float, hit=None, theta=None) -> np.ndarray:
@@ -196,7 +196,7 @@ def star_edge_measure(star: Star, dx: np.ndarray, dy: np.ndarray, h: float, hit=
     (The first square holds 1 px of the edge along +x, white above it (y < 0)
     and black below: grad P points to -y; no edge crosses the second.) It is
     the exact derivative of star_coverage * h^2 with respect to moving the
-    apex, with the sign flipped (tests/test_synth.py checks it against finite
+    apex, with the sign flipped (tests/synth/test_synth.py checks it against finite
     differences). Each edge e
     contributes (colour after - colour before) * n_e * (length of the ray
     inside the square), n_e = (-sin, cos) of the edge angle (pointing into
@@ -260,7 +260,7 @@ class FFTBlur:
     SYNOPSIS
 
         >>> import numpy as np
-        >>> from rotstar_mrcal.simulate.optics import convolve
+        >>> from rotstar_mrcal.simulate.blur import convolve
         >>> rng = np.random.default_rng(0)
         >>> k, img = rng.random((7, 5)), rng.random((2, 40, 30))
         >>> blur = FFTBlur(k / k.sum(), (40, 30))
@@ -299,7 +299,7 @@ class ViewRenderer:
     SYNOPSIS
 
         >>> import numpy as np
-        >>> from rotstar_mrcal.optics import gaussian_psf
+        >>> from rotstar_mrcal.optics.psf import gaussian_psf
         >>> from rotstar_mrcal.synth.patterns import pattern_frames
         >>> r = ViewRenderer(gaussian_psf(1.0, 4), 4, 21)
         >>> img, grad = r(pattern_frames("rotstar"), np.array((10.3, 9.6)))

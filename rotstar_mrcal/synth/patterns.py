@@ -162,7 +162,7 @@ def phase_frames(period: float = PHASE_PERIOD) -> list[Fringe]:
 
     SYNOPSIS
 
-        >>> from rotstar_mrcal.detect.phase import wrapped_phase
+        >>> from rotstar_mrcal.peers.phase import wrapped_phase
         >>> f = phase_frames(20.0)
         >>> x = np.array([[0.0, 5.0, -2.5]])                   # offsets along x (y = 0)
         >>> phi, _ = wrapped_phase(np.stack([g.value_at(x, 0 * x) for g in f[:4]]))

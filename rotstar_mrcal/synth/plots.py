@@ -28,7 +28,7 @@ import math
 import numpy as np
 from matplotlib.figure import Figure
 
-from .experiment import Protocol, psf_kernel, render_views
+from rotstar_mrcal.synth.experiment import Protocol, psf_kernel, render_views
 
 COLOURS = {"opencv": "tab:blue", "saddle": "tab:orange", "symmetric": "tab:green", "phase": "tab:red"}
 STYLES = {"checkerboard": "-", "rotstar": "--", "star16": ":", "phase": "-."}

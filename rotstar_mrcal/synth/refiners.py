@@ -4,7 +4,7 @@ SYNOPSIS
 
     >>> import numpy as np
     >>> from rotstar_mrcal.synth.refiners import REFINERS, applies, refine
-    >>> sorted(REFINERS)                      # the registry rotstar_mrcal.methods, and phase
+    >>> sorted(REFINERS)                      # the registry rotstar_mrcal.peers.registry, and phase
     ['opencv', 'phase', 'saddle', 'symmetric']
     >>> applies("rotstar", "saddle"), applies("phase", "saddle"), applies("phase", "phase")
     (True, False, True)
@@ -46,7 +46,7 @@ Which refiner applies to which pattern (applies): the wedge refiners
 (opencv, saddle, symmetric) need edges meeting at the corner, which fringes
 do not have; the phase refiner needs fringes, which wedges are not. The
 experiment runs only the pairs that apply; the others are "n/a" in its
-tables. The phase refiner is not in rotstar_mrcal.methods.REFINERS (whose
+tables. The phase refiner is not in rotstar_mrcal.peers.registry.REFINERS (whose
 refiners rotstar-detect --refine runs on the rotating-star or the
 checkerboard frames); on real sequences the same finder is the "phase"
 method of METHODS.
@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..methods import REFINERS as WEDGE_REFINERS, refiner
+from rotstar_mrcal.peers.registry import REFINERS as WEDGE_REFINERS, refiner
 
 PHASE = "phase"
 REFINERS = tuple(WEDGE_REFINERS) + (PHASE,)
@@ -82,7 +82,7 @@ def refine_phase(frames: np.ndarray, starts: np.ndarray, window=None) -> np.ndar
 
     `window` is ignored: the planes are fitted in detect.phase.HALF_WINDOW.
     """
-    from ..detect.phase import phase_corners
+    from rotstar_mrcal.peers.phase import phase_corners
 
     f = np.asarray(frames, float)
     if f.ndim != 3 or f.shape[0] != 8:

@@ -42,7 +42,7 @@ import tempfile
 
 import numpy as np
 
-from .experiment import SYMMETRIC, Protocol, run_task
+from rotstar_mrcal.synth.experiment import SYMMETRIC, Protocol, run_task
 
 
 def cache_path(protocol: Protocol, cache_dir: str, aberration: str, noise: float, phi) -> str:

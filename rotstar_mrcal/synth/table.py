@@ -55,9 +55,9 @@ import math
 
 import numpy as np
 
-from ..optics.crlb import crlb_rms
-from .metrics import failure_rate, pairwise_range, rms_error
-from .refiners import applies
+from rotstar_mrcal.optics.crlb import crlb_rms
+from rotstar_mrcal.synth.metrics import failure_rate, pairwise_range, rms_error
+from rotstar_mrcal.synth.refiners import applies
 
 COLUMNS = ("aberration", "noise", "phi", "pattern", "refiner", "range", "rms", "bias", "scatter", "bound",
            "rms_over_bound", "scatter_over_bound", "fail")

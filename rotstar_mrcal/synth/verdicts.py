@@ -69,7 +69,7 @@ import math
 
 import numpy as np
 
-from .experiment import SYMMETRIC
+from rotstar_mrcal.synth.experiment import SYMMETRIC
 
 SIGNIFICANT = 2.0
 EQUIVALENT = 1.5

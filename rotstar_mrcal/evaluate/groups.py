@@ -1,0 +1,233 @@
+"""Several corner sets of two pose groups: calibrate each, test each model on the other group, cross-validate
+
+SYNOPSIS
+
+    from rotstar_mrcal.evaluate.groups import compare_sets
+    c = compare_sets({"rotstar": ("xval/rotstar/A.vnl", "xval/rotstar/B.vnl")}, "xval", label="4000 us")
+    c.to_json()                      # what rotstar-crossval writes as xval/results.json
+    print(c.markdown())              # the table it prints
+    c.complete                       # every set calibrated
+
+rotstar-crossval's comparison mode. For each named corner set (a detector's
+corners of the same two pose groups A and B): mrcal-calibrate-cameras on
+each group (the lean model by default, calibrate.resolve_lensmodel; the
+commands run in worker processes), then compare.evaluate on the two models
+(held-out error both ways, mrcal's cross-validation, and on simulated data
+each model against the truth), the heat maps (each map its own colour
+scale, from zero to its data's range: plots.heatmaps) and the per-pose plot.
+The condition's label defaults to default_label's: the recording's name
+when A and B are the two halves of one, else "A vs B". A set that cannot be read or
+calibrated is reported in the result, not raised.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import os
+
+from rotstar_mrcal.calibrate import solve as cal
+from rotstar_mrcal.evaluate import compare
+from rotstar_mrcal.report import plots
+from rotstar_mrcal.calibrate.solve import calibration_argv, focal_seed, resolve_lensmodel
+from rotstar_mrcal.peers.registry import description
+from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
+
+FORMAT = "rotstar-crossval/1"
+
+
+@dataclasses.dataclass
+class Comparison:
+    """The result of compare_sets; owns its JSON form (results.json, read by rotstar-report)"""
+
+    label: str
+    groups: dict
+    lensmodel: str
+    distance_m: float | None
+    gridn: int
+    methods: list  # per set: compare.evaluate's summary + description, figures, models, corners; or an error
+    figures: dict
+    commands: list
+    failed: int = 0
+    sets: int = 0
+
+    @property
+    def complete(self) -> bool:
+        return self.failed == 0
+
+    def to_json(self) -> dict:
+        return {"format": FORMAT, "label": self.label, "groups": self.groups, "lensmodel": self.lensmodel,
+                "distance_m": self.distance_m, "gridn": self.gridn, "methods": self.methods,
+                "figures": self.figures, "commands": self.commands}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "Comparison":
+        if d.get("format") != FORMAT:
+            raise ValueError("not a rotstar-crossval results file")
+        return cls(d.get("label", ""), d.get("groups", {}), d.get("lensmodel", ""), d.get("distance_m"),
+                   d.get("gridn", 0), d.get("methods", []), d.get("figures", {}), d.get("commands", []),
+                   sum(1 for m in d.get("methods", []) if m.get("error")), len(d.get("methods", [])))
+
+    def markdown(self) -> str:
+        from rotstar_mrcal.report.page import detail
+
+        return detail(self.to_json()).markdown()
+
+
+def default_label(a: str, b: str) -> str:
+    """The name of a condition whose groups are the datasets or corners files a and b
+
+    SYNOPSIS
+
+        >>> default_label("lab/seq", "lab/seq")              # the two halves of one recording
+        'seq'
+        >>> default_label("seq/corners.vnl", "seq/corners.vnl")
+        'seq'
+        >>> default_label("near/", "far/corners.vnl")
+        'near vs far'
+    """
+    def name(p):
+        p = os.path.normpath(os.path.abspath(p))
+        return os.path.basename(os.path.dirname(p)) if os.path.basename(p) == "corners.vnl" else os.path.basename(p)
+
+    na, nb = name(a), name(b)
+    return na if na == nb else f"{na} vs {nb}"
+
+
+def _calibrate(job):
+    """Worker: run one printed mrcal-calibrate-cameras command (in this process: no start-up cost)"""
+    name, side, argv = job
+    try:
+        cal.run_calibration(argv, in_process=True)
+        return name, side, None
+    except cal.CalibrationError as e:
+        return name, side, str(e)
+
+
+def _evaluate(method, path_a, path_b, test_a, test_b, seq_a, seq_b, gridn, distance):
+    """Worker: one method's evaluation from its two model files"""
+    import mrcal
+
+    from rotstar_mrcal.simulate.dataset import load_truth
+
+    def truth(seq):
+        if seq and os.path.exists(os.path.join(seq, "truth.json")):
+            t = load_truth(seq)
+            return compare.TrueCamera(t.model, t.rt_cam_board)
+        return None
+
+    return compare.evaluate(method, mrcal.cameramodel(path_a), mrcal.cameramodel(path_b), test_a, test_b,
+                            truth(seq_a), truth(seq_b), gridn_width=gridn, distance=distance)
+
+
+def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int = cal.DEFAULT_KNOTS_X,
+                 pattern: str | None = None, imagersize=None, gridn: int = 40, distance: float | None = None,
+                 jobs: int = 1, label: str | None = None, log=None, progress=None) -> "Comparison":
+    """sets: {name: (vnl A, vnl B)}; calibrate, test, cross-validate, draw; the Comparison (module doc)
+
+    log(line): messages (commands, failures); progress(label, message): one
+    per calibration and evaluation. Raises SourceError when no set can be
+    read.
+    """
+    import matplotlib.pyplot as plt
+
+    log = log or (lambda s: None)
+    step = progress or (lambda lbl, msg: None)
+    os.makedirs(outdir, exist_ok=True)
+    loaded, failed = {}, {}
+    for name, (va, vb) in sets.items():
+        try:
+            loaded[name] = (load_corner_set(va, pattern, imagersize),
+                            load_corner_set(vb, pattern, imagersize))
+            few = [f"{s}: {len(c.files)} boards" for s, c in zip("AB", loaded[name]) if len(c.files) < cal.MIN_BOARDS]
+            if few:
+                del loaded[name]
+                raise SourceError(f"too few boards to calibrate ({', '.join(few)}; need {cal.MIN_BOARDS})")
+        except SourceError as e:  # e.g. a detector that found no board in a group: a result, not a crash
+            log(f"{name}: {e}")
+            failed[name] = [str(e)]
+    if not loaded:
+        raise SourceError("no corner set could be read")
+    first = next(iter(loaded.values()))[0]
+    lensmodel = resolve_lensmodel(lensmodel, first.imagersize, focal_seed(first, check=False), knots_x)
+    if "SPLINED" in lensmodel and min(len(c.files) for p in loaded.values() for c in p) < cal.SPLINED_MIN_BOARDS:
+        log(f"warning: fewer than {cal.SPLINED_MIN_BOARDS} boards in a group for a splined model; "
+            "consider the default (lean) model")
+
+    cjobs = []
+    for name, (ca, cb) in loaded.items():
+        for side, cs in (("A", ca), ("B", cb)):
+            cjobs.append((name, side, calibration_argv(cs, os.path.join(outdir, name, side), lensmodel)))
+    for name, side, argv in cjobs:
+        log(f"[{name} {side}] $ {cal.command_line(argv)}")
+
+    with cf.ProcessPoolExecutor(max(1, jobs)) as ex:
+        for name, side, err in ex.map(_calibrate, cjobs):
+            step(f"calibrate {name} {side}", "failed" if err else "done")
+            if err:
+                failed.setdefault(name, []).append(f"{side}: {err}")
+    for name, errs in failed.items():
+        if name in loaded:
+            log(f"{name}: calibration failed: " + "; ".join(errs))
+
+    todo = [n for n in loaded if n not in failed]
+    model = {n: {s: os.path.join(outdir, n, s, "camera-0.cameramodel") for s in "AB"} for n in todo}
+    args = {n: (n, model[n]["A"], model[n]["B"], loaded[n][0].test_set(), loaded[n][1].test_set(),
+                loaded[n][0].seq, loaded[n][1].seq, gridn, distance) for n in todo}
+    evals = {}
+    if jobs > 1 and len(todo) > 1:
+        with cf.ProcessPoolExecutor(min(jobs, len(todo))) as ex:
+            futs = {ex.submit(_evaluate, *args[n]): n for n in todo}
+            for f in cf.as_completed(futs):
+                evals[futs[f]] = f.result()
+                step(f"evaluate {futs[f]}", "done")
+    else:
+        for n in todo:
+            evals[n] = _evaluate(*args[n])
+            step(f"evaluate {n}", "done")
+
+    # figures: each map its own colour scale from its data (plots.heatmaps), so that 0.01 px structure shows
+    first_a, first_b = next(iter(loaded.values()))
+    label = label or default_label(first_a.seq or first_a.vnl, first_b.seq or first_b.vnl)
+    methods_out = []
+    for n in sets:
+        if n in failed:
+            methods_out.append({"method": n, "description": description(n), "error": "; ".join(failed[n]),
+                                "heldout": None, "crossval": None, "truth": None})
+            continue
+        e = evals[n]
+        ca, cb = loaded[n]
+        panels, points = [], []
+        if e.crossval is not None:
+            panels += [("|projection diff| A vs B", e.crossval.diff), ("uncertainty A (1-sigma)", e.crossval.u0),
+                       ("uncertainty B (1-sigma)", e.crossval.u1)]
+            points += [None, ca.corners.reshape(-1, 2), cb.corners.reshape(-1, 2)]
+        for side, cs in (("A", ca), ("B", cb)):
+            if side in e.truth:
+                panels.append((f"calibrated on {side} vs true model", e.truth[side].error))
+                points.append(cs.corners.reshape(-1, 2))
+        figs = {}
+        if panels:
+            fig = plots.heatmaps(e.crossval.q if e.crossval is not None else e.truth["A"].q, panels,
+                                 ca.imagersize, points=points, title=f"{n}: {label}")
+            figs["maps"] = f"{n}-maps.png"
+            fig.savefig(os.path.join(outdir, figs["maps"]), dpi=100)
+            plt.close(fig)
+        methods_out.append({**e.summary, "description": description(n), "figures": figs,
+                            "models": {s: os.path.relpath(model[n][s], outdir) for s in "AB"},
+                            "corners": {"A": os.path.abspath(ca.vnl), "B": os.path.abspath(cb.vnl)}})
+    per_pose = [(f"calibrated on A, tested on B ({label})",
+                 {m["method"]: m["heldout"]["A->B"]["per_pose"] for m in methods_out if m.get("heldout")}),
+                (f"calibrated on B, tested on A ({label})",
+                 {m["method"]: m["heldout"]["B->A"]["per_pose"] for m in methods_out if m.get("heldout")})]
+    figures = {}
+    if any(p[1] for p in per_pose):
+        fig = plots.per_pose(per_pose)
+        figures["per_pose"] = "per-pose.png"
+        fig.savefig(os.path.join(outdir, figures["per_pose"]), dpi=100)
+        plt.close(fig)
+    return Comparison(
+        label=label,
+        groups={"A": first_a.seq or first_a.vnl, "B": first_b.seq or first_b.vnl},
+        lensmodel=lensmodel, distance_m=distance, gridn=gridn, methods=methods_out, figures=figures,
+        commands=[cal.command_line(argv) for _, _, argv in cjobs], failed=len(failed), sets=len(sets))

@@ -1,0 +1,111 @@
+"""player.html: the display loop, full screen, one PNG pixel per device pixel
+
+SYNOPSIS
+
+    >>> import json, os, tempfile
+    >>> from rotstar_mrcal.cli.pattern import main as rotstar_pattern
+    >>> from rotstar_mrcal.pattern.player import write_player
+    >>> out = tempfile.mkdtemp()
+    >>> rotstar_pattern(["--out", out, "--screen", "800x600", "--pitch", "100", "--band", "24"])
+    0
+    >>> fn = write_player(out, hold=20)          # rotstar-pattern already wrote one
+    >>> os.path.basename(fn), os.path.getsize(fn) > 10000
+    ('player.html', True)
+
+One self-contained page: the frame PNGs are embedded (base64) together with
+the loop (display/loop.py) and the screen size of pattern.json, so the file
+can be copied or served alone. The page
+
+- decodes every PNG once into an ImageData (no colour conversion) and shows a
+  frame with putImageData on a canvas whose backing store is the pattern's
+  size in device pixels and whose CSS size is that divided by
+  devicePixelRatio: a raw pixel copy, no scaling, no smoothing;
+- advances in requestAnimationFrame, holding each loop entry for `hold`
+  display refreshes (the start marker for `marker_hold`);
+- opens on a check screen: 1-px stripes and checkers that turn grey or show
+  beats when the mapping is not 1:1, a one-pixel frame around the screen
+  edge that shows cropping, the measured refresh rate, and a warning that
+  lists what breaks the mapping (fractional devicePixelRatio, pinch or
+  browser zoom, a page or screen size that does not match pattern.json,
+  portrait orientation);
+- controls: tap / Space / Enter start (full screen where the browser allows
+  it); while playing tap or Space pauses; paused, the left / right third of
+  the screen or the arrow keys step, the middle third or Space resumes; R
+  restarts at the start marker, C or a long press returns to the check
+  screen, F toggles full screen, + / - change the hold on the check screen.
+  URL options: #hold=N&markerhold=N&play.
+
+For tests and remote control the page exposes window.rotstar: ready (a
+Promise), show(k) (pause on loop entry k), check(), play(), status().
+"""
+
+from __future__ import annotations
+
+import base64
+import importlib.resources
+import json
+import os
+
+from rotstar_mrcal.atomic import atomic_write
+from rotstar_mrcal.pattern.layout import layout_from_dict
+from rotstar_mrcal.pattern.loop import player_loop
+
+TEMPLATE = "player_template.html"
+DEFAULT_HOLD = 30
+"""Display refreshes per loop entry: 0.5 s at 60 Hz, 12 frames of a 25 fps camera"""
+
+
+def player_config(pattern: dict, pngs: dict[str, bytes], hold: int = DEFAULT_HOLD,
+                  marker_hold: int | None = None) -> dict:
+    """The page's configuration: screen size, loop, hold times, embedded PNGs
+
+    pattern: the pattern.json dictionary; pngs: {file name: PNG bytes} for
+    every frame of pattern["frames"].
+    """
+    layout = layout_from_dict(pattern)
+    if hold < 1 or (marker_hold is not None and marker_hold < 1):
+        raise ValueError("hold times must be at least one display refresh")
+    loop = player_loop(pattern["frames"])
+    for e in loop[1:]:
+        if e["file"] not in pngs:
+            raise ValueError(f"{e['file']}: no PNG for this frame of pattern.json")
+    return {
+        "format": "rotstar-player/1",
+        "width": layout.screen_width,
+        "height": layout.screen_height,
+        "hold": int(hold),
+        "markerHold": int(marker_hold or hold),
+        "loop": [
+            {
+                "kind": e["kind"],
+                "file": e["file"],
+                "src": None if e["file"] is None
+                else "data:image/png;base64," + base64.b64encode(pngs[e["file"]]).decode("ascii"),
+            }
+            for e in loop
+        ],
+    }
+
+
+def render_player(config: dict) -> str:
+    """The HTML text of the page for a player_config"""
+    template = importlib.resources.files(__package__).joinpath(TEMPLATE).read_text(encoding="utf-8")
+    blob = json.dumps(config, separators=(",", ":")).replace("</", "<\\/")
+    if template.count("/*ROTSTAR-CONFIG*/") != 1:
+        raise RuntimeError(f"{TEMPLATE}: the configuration placeholder is missing")
+    return template.replace("/*ROTSTAR-CONFIG*/", blob)
+
+
+def write_player(folder: str, hold: int = DEFAULT_HOLD, marker_hold: int | None = None,
+                 name: str = "player.html") -> str:
+    """Write folder/player.html from folder/pattern.json and the frame PNGs beside it"""
+    with open(os.path.join(folder, "pattern.json")) as f:
+        pattern = json.load(f)
+    pngs = {}
+    for fr in pattern["frames"]:
+        with open(os.path.join(folder, fr["file"]), "rb") as f:
+            pngs[fr["file"]] = f.read()
+    fn = os.path.join(folder, name)
+    with atomic_write(fn, encoding="utf-8") as f:
+        f.write(render_player(player_config(pattern, pngs, hold, marker_hold)))
+    return fn
