@@ -29,7 +29,7 @@ other by more than MAX_TURN_DEG about their axes are flagged). A pose whose
 boards disagree is dropped from every camera (a missing board only weakens
 a calibration; a mislabelled one corrupts it). After calibration, a
 mislabelled board shows as a board whose corners mrcal mostly rejects
-(validate/rig.py reports it per camera).
+(calibrate/rig.py reports it per camera).
 """
 
 from __future__ import annotations

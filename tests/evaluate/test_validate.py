@@ -1,4 +1,4 @@
-"""Validation with mrcal (rotstar_mrcal.validate) on corners simulated from a known camera
+"""Validation with mrcal (rotstar_mrcal.calibrate and rotstar_mrcal.evaluate) on corners simulated from a known camera
 
 The corner-level datasets here are what a detector would write for the
 `d435` camera at random poses: the true projections plus Gaussian noise, in a

@@ -1,4 +1,4 @@
-"""The calib-bench table and the doc block it rewrites (validate/modelcheck); the runs themselves: make calib-bench"""
+"""The calib-bench table and the doc block it rewrites (rotstar_lab.modelcheck); the runs themselves: make calib-bench"""
 
 from rotstar_lab.modelcheck import TOLERANCE, printed_command, table
 
