@@ -29,11 +29,12 @@ ifeq ($(UV),)
 UV := $(CURDIR)/.tools/bin/uv
 endif
 
-.PHONY: help setup test demo stereo bench calib-bench coverage-bench pip-check clean check-python system-deps python
+.PHONY: help setup test test-slow demo stereo bench calib-bench coverage-bench pip-check clean check-python system-deps python
 
 help:
 	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
 	@echo "make test   - run the test suite (all set-up included)"
+	@echo "make test-slow - the long end-to-end tests that make test leaves out"
 	@echo "make stereo - simulated D435 stereo pair: joint calibrations vs the truth, cross-validation, depth error at 0.5/1/2 m"
 	@echo "make bench  - accuracy and speed against OpenCV and mrgingham, partial views against ChArUco, each method's failure modes, then calib-bench and coverage-bench"
 	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses)"
@@ -74,6 +75,11 @@ setup: .venv/.synced system-deps
 
 test: setup
 	$(RUN) $(VENV_BIN)/python -m pytest -q $(PYTEST_ARGS)
+
+# the long end-to-end runs that make test leaves out (marked slow): whole benchmarks in small, every
+# player check in chromium, the report of a simulated run, the plain-pip install (make pip-check)
+test-slow: setup
+	$(RUN) $(VENV_BIN)/python -m pytest -q -m slow --deselect tests/cli/test_pip_install.py $(PYTEST_ARGS)
 
 demo: setup
 	$(RUN) $(VENV_BIN)/python scripts/demo.py --out $(DEMO_DIR)
