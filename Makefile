@@ -79,7 +79,7 @@ test: setup
 # the long end-to-end runs that make test leaves out (marked slow): whole benchmarks in small, every
 # player check in chromium, the report of a simulated run, the plain-pip install (make pip-check)
 test-slow: setup
-	$(RUN) $(VENV_BIN)/python -m pytest -q -m slow --deselect tests/cli/test_pip_install.py $(PYTEST_ARGS)
+	$(RUN) $(VENV_BIN)/python -m pytest -q -m slow --ignore=tests/cli/test_pip_install.py $(PYTEST_ARGS)
 
 demo: setup
 	$(RUN) $(VENV_BIN)/python scripts/demo.py --out $(DEMO_DIR)
