@@ -104,6 +104,8 @@ def contact_graph(contours: list, shape: tuple[int, int], lattice: np.ndarray | 
         kk = min(24, len(allpts))
         keep, ask = knn_third_party(allpts, owner, p, a, b, k=kk) if kk == 24 else (None, np.ones(len(p), bool))
         if ask.any():  # ties at the 24th distance that cKDTree's order decides
+            # scipy.spatial costs 0.5-0.8 s to import (python -X importtime), more than detecting
+            # a pose: imported only on such rare ties
             from scipy.spatial import cKDTree
 
             q = np.flatnonzero(ask)

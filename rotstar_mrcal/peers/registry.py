@@ -53,26 +53,13 @@ from typing import Callable
 import numpy as np
 
 from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.detect.pipeline import detect_pose
+from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_symmetric
 
 
 # ---------------------------------------------------------------------------
 # refiners: start corners on frames -> corners
 # ---------------------------------------------------------------------------
-def refine_symmetric(frames, starts, window=10.0) -> np.ndarray:
-    """The paper's Eq. 1 (detect.refine.symmetric_refine) on all frames jointly
-
-    >>> import numpy as np
-    >>> y, x = np.mgrid[0:30, 0:30].astype(float)
-    >>> frames = (128 + 100 * np.tanh(x - 14.3) * np.tanh(y - 15.6))[None]
-    >>> np.round(refine_symmetric(frames, [[15.0, 15.0]], 6), 2)
-    array([[14.3, 15.6]])
-    """
-    from rotstar_mrcal.detect.refine import symmetric_refine
-
-    return symmetric_refine(np.asarray(frames, np.float32), np.asarray(starts, float).reshape(-1, 2),
-                            window=window).corners
-
-
 def _per_frame_mean(fn, frames, starts, window) -> np.ndarray:
     """fn(image, starts, win) on every frame from the same starts; the mean (NaN in any frame -> NaN)"""
     frames = np.asarray(frames, np.float32)
@@ -95,16 +82,8 @@ def refine_saddle(frames, starts, window=5) -> np.ndarray:
     return _per_frame_mean(saddle_refine, frames, starts, window)
 
 
-@dataclasses.dataclass(frozen=True)
-class Refiner:
-    name: str
-    needs: str  # 'rotstar': uses the rotating-star frames jointly; 'checkerboard': one image at a time
-    description: str
-    refine: Callable  # (frames (K, H, W), starts (N, 2), window) -> (N, 2), NaN = failed
-
-
 REFINERS = {r.name: r for r in (
-    Refiner("symmetric", "rotstar", "the paper's point-symmetry fit (Eq. 1) on all frames jointly", refine_symmetric),
+    SYMMETRIC,
     Refiner("opencv", "checkerboard", "cv2.cornerSubPix (Forstner); on several frames, the mean of each frame's",
             refine_opencv),
     Refiner("saddle", "checkerboard", "Lucchese-Mitra quadratic saddle fit; on several frames, the mean",
@@ -155,8 +134,6 @@ class Found:
 def rotstar_detection(p: PoseImages):
     """detect_pose on p.frames (default options), computed once per PoseImages"""
     if p.detection is None:
-        from rotstar_mrcal.detect.pipeline import detect_pose
-
         p.detection = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale,
                                   window=p.window, identity=p.identity)
     return p.detection
