@@ -10,9 +10,10 @@ SYNOPSIS
     >>> _ = dataset.write_pattern(seq, layout)
     >>> frames = {f["file"]: np.zeros((40, 60), np.uint16) for f in layout.frames()}
     >>> _ = dataset.write_pose(seq, "pose000", frames)
-    >>> dataset.list_poses(seq)
-    ['pose000']
-    >>> pose = dataset.load_pose(seq, "pose000", dataset.read_pattern(seq)[1])
+    >>> ds = dataset.open_dataset(seq)           # read once, passed on (Dataset)
+    >>> ds.poses                                 # per camera; one camera is a rig of one
+    {0: ['pose000']}
+    >>> pose = ds.load("pose000")
     >>> pose.rotstar.shape, pose.identity.shape, pose.checkerboard.shape, pose.full_scale
     ((8, 40, 60), (10, 40, 60), (40, 60), 65535.0)
 
@@ -24,7 +25,8 @@ Layout on disk:
                                   single-channel PNG
 
 Pose folders are the sub-folders that hold at least one of the frame files;
-they are processed in sorted order. Problems are raised as DatasetError with
+they are processed in sorted order. Several cameras: seq/poseNNN/camera-K/<file>
+(read_rig; doc/dataset.md). Problems are raised as DatasetError with
 a one-line message that names the file and the reason.
 """
 

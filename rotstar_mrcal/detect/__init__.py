@@ -24,9 +24,11 @@ The stages, in the paper's order (section 3):
                      the camera does
 
     pipeline         one pose through the stages: detect_pose
-    run              a whole dataset: detect_dataset
-    rig              several cameras' poses, their labelling checked across
-                     cameras
+    run              a whole dataset (dataset.open_dataset), one camera or
+                     several: detect_dataset -> Detection (corners, per-pose
+                     reasons, focal seeds, mrcal's command)
+    rig              several cameras: each board's labelling checked across
+                     the cameras
 
 The methods rotstar is compared against are in rotstar_mrcal.peers. See
 doc/detector.md.

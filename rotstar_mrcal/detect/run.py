@@ -2,8 +2,9 @@
 
 SYNOPSIS
 
-    from rotstar_mrcal.dataset import open_dataset
-    from rotstar_mrcal.detect.run import detect_dataset
+    >>> from rotstar_mrcal.dataset import open_dataset
+    >>> from rotstar_mrcal.detect.run import detect_dataset
+
     ds = open_dataset("seq")                     # read once (DatasetError: one line)
     det = detect_dataset(ds, jobs=2)             # window=, refine=REFINERS[...], max_motion=, method=,
                                                  # progress=, corners_file=, weights= (below)
@@ -17,6 +18,21 @@ SYNOPSIS
     det.focal[k]                     # camera k's focal seed (px), for mrcal's --focal
     det.command                      # the mrcal-calibrate-cameras command ('' when no calibration can run:
                                      # no board, or a camera of a rig with < 2: det.thin)
+    vnl.write_corners(f, det.boards(), det.weights() if weights else None)   # corners.vnl, as rotstar-detect
+
+A pose that gives no board says why:
+
+    >>> import tempfile
+    >>> import numpy as np
+    >>> from rotstar_mrcal.dataset import write_pattern, write_pose
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> seq = tempfile.mkdtemp(); layout = make_layout(screen=(800, 600), pitch=100, band=24)
+    >>> _ = write_pattern(seq, layout)
+    >>> _ = write_pose(seq, "pose000", {f["file"]: np.zeros((40, 60), np.uint8) for f in layout.frames()})
+    >>> det = detect_dataset(open_dataset(seq))
+    >>> r = det.cameras[0].results[0]
+    >>> r.pose, r.found, r.error[:8], det.kept, det.command
+    ('pose000', False, 'all dark', {0: []}, '')
 
 Every camera is detected alike (one camera is a rig of one, its pose folders
 'poseNNN'; a rig's are 'poseNNN/camera-K'). Poses are detected independently
