@@ -94,7 +94,7 @@ def parse_args(argv=None):
 
 def plot_signal(fn: str, seg, title: str) -> None:
     """The difference signal with the threshold, the stretches and the frames averaged"""
-    import matplotlib
+    import matplotlib  # matplotlib.pyplot costs 2.1 s to import (-X importtime): only with --plot
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

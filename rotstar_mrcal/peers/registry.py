@@ -55,6 +55,11 @@ import numpy as np
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.detect.pipeline import detect_pose
 from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_symmetric
+from rotstar_mrcal.peers import checkerboard as baselines
+from rotstar_mrcal.peers.checkerboard import (
+    mrgingham_detect, opencv_find_chessboard, opencv_subpix, refine_by_window, saddle_refine,
+)
+from rotstar_mrcal.peers.phase import phase_corners
 
 
 # ---------------------------------------------------------------------------
@@ -70,15 +75,11 @@ def _per_frame_mean(fn, frames, starts, window) -> np.ndarray:
 
 def refine_opencv(frames, starts, window=5) -> np.ndarray:
     """cv2.cornerSubPix (detect.baselines.opencv_subpix) on each frame, half window int(window); the mean"""
-    from rotstar_mrcal.peers.checkerboard import opencv_subpix
-
     return _per_frame_mean(opencv_subpix, frames, starts, window)
 
 
 def refine_saddle(frames, starts, window=5) -> np.ndarray:
     """The Lucchese-Mitra saddle fit (detect.baselines.saddle_refine) on each frame; the mean"""
-    from rotstar_mrcal.peers.checkerboard import saddle_refine
-
     return _per_frame_mean(saddle_refine, frames, starts, window)
 
 
@@ -151,8 +152,6 @@ def _rotstar_weighted(p: PoseImages) -> Found:
 
 def _finder(how: str, what: str):
     def run(p: PoseImages) -> Found:
-        from rotstar_mrcal.peers.checkerboard import opencv_find_chessboard
-
         if p.checkerboard is None:
             return Found(None, None, "no checkerboard frame")
         c = opencv_find_chessboard(np.asarray(p.checkerboard, np.float32), p.layout.nx, p.layout.ny,
@@ -176,8 +175,6 @@ def _start(p: PoseImages):
 
 def _from_rotstar(fn_name: str):
     def run(p: PoseImages) -> Found:
-        from rotstar_mrcal.peers import checkerboard as baselines
-
         if p.checkerboard is None:
             return Found(None, None, "no checkerboard frame")
         start = _start(p)
@@ -196,8 +193,6 @@ def _phase(p: PoseImages, saturation: str = "reject") -> Found:
     saturation: 'reject' drops a corner whose phase window holds a clipped
     value; 'keep' fits the clipped values as they are (the paper's pipeline).
     """
-    from rotstar_mrcal.peers.phase import phase_corners
-
     if p.phase is None:
         return Found(None, None, "no phase-shift frames")
     if not p.layout.phase:
@@ -213,8 +208,6 @@ def _phase(p: PoseImages, saturation: str = "reject") -> Found:
 
 def _star(p: PoseImages) -> Found:
     """The symmetric refinement (Eq. 1) on the one star frame, from rotstar's corners in rotstar's windows"""
-    from rotstar_mrcal.peers.checkerboard import refine_by_window
-
     if p.star is None:
         return Found(None, None, "no star frame")
     start = _start(p)
@@ -237,8 +230,6 @@ def reason_counts(reason) -> str:
 
 
 def _mrgingham(p: PoseImages, *args) -> Found:
-    from rotstar_mrcal.peers.checkerboard import mrgingham_detect
-
     if p.png is None:
         return Found(None, None, "no square checkerboard image")
     c = mrgingham_detect([p.png], p.layout.nx, jobs=1, extra_args=args)[p.png]
