@@ -15,7 +15,7 @@ SYNOPSIS
 The stages (paper 3.2-3.3): response map -> element boundaries -> rough
 corners -> grid indexing and orientation -> refinement; with identity frames
 (issue 13) the elements are found and named by their identity codes instead
-of the response map and the element graph (labelled.py: by_identity,
+of the response map and the element graph (elements.py: by_identity,
 by_graph), so that boards partly out of view give the corners in view; with the checks that
 name what went wrong: exposure, the border bands' colour frame by frame
 (sequence.py: frames out of order), the element count (too small, hidden,
@@ -256,8 +256,8 @@ def detect_pose(
         found = by_identity(frames, identity, layout, window)
     else:
         found = by_graph(frames, layout, window)
-    if isinstance(found, str):
-        return _fail(layout, found)
+    if found.error:
+        return _fail(layout, found.error)
     labels, w = found.labels, found.window
     # work on the corners' bounding box from here on (all stages are local)
     H, W = frames.shape[1:]
