@@ -10,9 +10,10 @@ SYNOPSIS
     >>> _ = dataset.write_pattern(seq, layout)
     >>> frames = {f["file"]: np.zeros((40, 60), np.uint16) for f in layout.frames()}
     >>> _ = dataset.write_pose(seq, "pose000", frames)
-    >>> dataset.list_poses(seq)
-    ['pose000']
-    >>> pose = dataset.load_pose(seq, "pose000", dataset.read_pattern(seq)[1])
+    >>> ds = dataset.open_dataset(seq)           # read once, passed on (Dataset)
+    >>> ds.poses                                 # per camera; one camera is a rig of one
+    {0: ['pose000']}
+    >>> pose = ds.load("pose000")
     >>> pose.rotstar.shape, pose.identity.shape, pose.checkerboard.shape, pose.full_scale
     ((8, 40, 60), (10, 40, 60), (40, 60), 65535.0)
 
@@ -24,7 +25,8 @@ Layout on disk:
                                   single-channel PNG
 
 Pose folders are the sub-folders that hold at least one of the frame files;
-they are processed in sorted order. Problems are raised as DatasetError with
+they are processed in sorted order. Several cameras: seq/poseNNN/camera-K/<file>
+(read_rig; doc/dataset.md). Problems are raised as DatasetError with
 a one-line message that names the file and the reason.
 """
 
@@ -192,7 +194,7 @@ def header_size(fn: str) -> tuple[int, int] | None:
         return None
     if len(head) >= 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
         return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
-    from PIL import Image  # matplotlib's dependency
+    from PIL import Image  # matplotlib's dependency; 0.13 s to import (-X importtime), only for non-PNG frames
 
     try:
         with warnings.catch_warnings():  # Pillow warns of large images on stderr: check_frame_size judges
@@ -564,3 +566,85 @@ def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
                                f"of one camera ({camera_folder(k)}) must have the same size")
         sizes[k] = next(iter(seen)) if seen else None
     return Rig(seq, cameras, sorted(held), poses, sizes, absent)
+
+
+# ---- a dataset opened once ---------------------------------------------------------------
+@dataclasses.dataclass
+class Dataset:
+    """A dataset opened once (open_dataset), passed on to every level that reads it
+
+    SYNOPSIS
+
+        >>> import tempfile
+        >>> from rotstar_mrcal.pattern.layout import make_layout
+        >>> seq = tempfile.mkdtemp()
+        >>> _ = write_pattern(seq, make_layout(screen=(800, 600), pitch=100, band=24))
+        >>> ds = open_dataset(seq)
+        >>> _ = write_pose(seq, "pose000", {f["file"]: np.zeros((40, 60), np.uint8) for f in ds.frames})
+        >>> ds = open_dataset(seq)
+        >>> ds.cameras, ds.poses, ds.sizes, ds.multi_camera
+        ([0], {0: ['pose000']}, {0: (60, 40)}, False)
+        >>> ds.load("pose000").rotstar.shape
+        (8, 40, 60)
+
+    One camera is a rig of one: cameras [0], its pose folders 'poseNNN'; a
+    multi-camera dataset (read_rig) has cameras [0, 1, ...] and pose folders
+    'poseNNN/camera-K'. Names are relative to path; load(name) reads one
+    (load_pose). sizes[k] is camera k's image size (width, height) from the
+    first pose's header (None if unreadable); absent[k] the poses in which
+    camera k has no folder; unmatched the folders holding images none of
+    which is named as in pattern.json (unmatched_folders; one camera only).
+    """
+
+    path: str
+    pattern: dict
+    layout: Layout
+    cameras: list[int]
+    poses: dict[int, list[str]]
+    sizes: dict[int, tuple[int, int] | None]
+    absent: dict[int, list[str]]
+    unmatched: dict[str, str]
+    rig: Rig | None = None  # the multi-camera layout, or None for one camera
+
+    @property
+    def frames(self) -> list[dict]:
+        return self.pattern["frames"]
+
+    @property
+    def first_frame(self) -> str:
+        """The first rotating-star frame's file name: mrcal's filename column"""
+        return next(f["file"] for f in self.frames if f["kind"] == "rotstar")
+
+    @property
+    def multi_camera(self) -> bool:
+        return self.rig is not None
+
+    @property
+    def pose_names(self) -> list[str]:
+        """The pose folders directly in path, sorted ('poseNNN' whatever the cameras)"""
+        return self.rig.pose_names if self.rig else self.poses[0]
+
+    def load(self, name: str) -> Pose:
+        """One pose folder (a name from poses) read: DatasetError on missing, unreadable or mismatched files"""
+        return load_pose(self.path, name, self.frames)
+
+    def only(self, names: list[str]) -> Dataset:
+        """The same dataset restricted to the pose folders `names` (of one camera)"""
+        return dataclasses.replace(self, poses={k: [p for p in v if p in names] for k, v in self.poses.items()})
+
+
+def open_dataset(path: str) -> Dataset:
+    """Read pattern.json and list the poses (and cameras) of a dataset; DatasetError, one line, when it cannot"""
+    pattern, layout = read_pattern(path)
+    frames = pattern["frames"]
+    if is_multi_camera(path):
+        rig = read_rig(path, frames)
+        return Dataset(path, pattern, layout, rig.cameras, rig.poses, rig.sizes, rig.absent, {}, rig)
+    poses = list_poses(path, frames)
+    unmatched = unmatched_folders(path, frames)
+    first = next(f["file"] for f in frames if f["kind"] == "rotstar")
+    try:
+        size = image_size(os.path.join(path, poses[0], first)) if poses else None
+    except DatasetError:  # an absurd header: load_pose skips that pose, naming it
+        size = None
+    return Dataset(path, pattern, layout, [0], {0: poses}, {0: size}, {0: []}, unmatched)

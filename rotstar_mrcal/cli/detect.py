@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import stat
 import sys
 
 from rotstar_mrcal import dataset
 from rotstar_mrcal.detect.display_offsets import MAX_MOTION
 from rotstar_mrcal.detect.elements import MIN_WINDOW
-from rotstar_mrcal.peers.registry import METHODS, REFINERS
-from rotstar_mrcal.detect.run import detect_dataset
-from rotstar_mrcal.calibrate.focal import estimate_focal
+from rotstar_mrcal.peers.registry import METHODS, REFINERS, reason_counts
+from rotstar_mrcal.detect.run import detect_dataset, missing_frames
 from rotstar_mrcal.vnl import write_corners
 from rotstar_mrcal.cli.common import (
     EXIT_FAILED, HelpFormatter, exit_status_help, Progress, atomic_write, check_output_path, fail,
@@ -82,20 +82,11 @@ def parse_args(argv=None):
     return a
 
 
-def mrcal_command(layout, imagersize, focal, vnl_name, glob, weights=False) -> str:
-    """The mrcal-calibrate-cameras command to run next: rotstar-calibrate's lean model, one builder"""
-    from rotstar_mrcal.calibrate.solve import hint_command
-
-    return hint_command(layout, imagersize, focal, vnl_name, glob, weights)
-
-
 def corners_name(output) -> tuple[str, bool]:
     """(the corners file to name in the hint, whether it is the real one): -o, or the file stdout goes to"""
     if output:
         return output, True
     try:
-        import stat
-
         if stat.S_ISREG(os.fstat(sys.stdout.fileno()).st_mode):
             path = os.readlink(f"/proc/self/fd/{sys.stdout.fileno()}")
             rel = os.path.relpath(path)
@@ -129,6 +120,117 @@ def main(argv=None) -> int:
     return run("rotstar-detect", _main, argv)
 
 
+def _main(argv=None) -> int:
+    """parse -> open the dataset -> detect (detect.run.detect_dataset) -> write the corners -> print"""
+    a = parse_args(argv)
+    ds, fell_back = open_for_detection(a)
+    progress = Progress(sum(len(v) for v in ds.poses.values()) + len(ds.unmatched), a.quiet)
+    say_before(a, ds, progress)
+    vnl_name, real = corners_name(a.output)
+    try:
+        det = detect_dataset(ds, window=a.window, refine=REFINERS[a.refine], max_motion=a.max_motion, jobs=a.jobs,
+                             progress=lambda r: progress_line(a, ds.layout, progress, r), method=a.method,
+                             corners_file=vnl_name, weights=a.weights)
+    except dataset.DatasetError as e:
+        fail(str(e))
+    say_checks(a, det)
+    sparse = write_output(a.output, det.boards(), det.weights() if a.weights else None)
+    rc = say_boards(det, sparse) or say_command(a, det, real)
+    return EXIT_FAILED if fell_back else rc
+
+
+def open_for_detection(a) -> tuple[dataset.Dataset, bool]:
+    """(the dataset opened once, whether --method fell back to rotstar); fail() on one that cannot be read"""
+    try:
+        ds = dataset.open_dataset(a.seq)
+    except dataset.DatasetError as e:
+        fail(str(e))
+    fell_back = fall_back_to_rotstar(a, ds)
+    if not ds.poses[0] and not ds.multi_camera:
+        why = f" ({next(iter(ds.unmatched.values()))})" if ds.unmatched else ""
+        fail(f"{a.seq}: no pose folders with frames from pattern.json{why}")
+    if a.output:  # never over an input: pattern.json, a frame, anything in a pose folder
+        check_output_path(a.output, [os.path.join(a.seq, "pattern.json")]
+                          + [os.path.join(a.seq, p) for p in ds.pose_names + list(ds.unmatched)])
+    return ds, fell_back
+
+
+def say_before(a, ds: dataset.Dataset, progress: Progress) -> None:
+    """The folders that are no pose, and the poses a camera of a rig did not see"""
+    for name, msg in ds.unmatched.items():
+        progress.step(name, f"skipped: {msg}", important=True)
+    for k in ds.cameras:
+        if ds.absent[k] and not a.quiet:
+            say(f"rotstar-detect: {dataset.camera_folder(k)} has no folder in {len(ds.absent[k])} pose(s) "
+                f"({', '.join(ds.absent[k][:4])}{' ...' if len(ds.absent[k]) > 4 else ''}): no board there")
+
+
+def progress_line(a, layout, progress: Progress, r) -> None:
+    """One pose done: its corners and why some are missing, or why it was skipped"""
+    if not r.found:
+        progress.step(r.pose, f"skipped: {r.error}", important=True)
+        return
+    nx_ny = layout.nx * layout.ny
+    why = ""
+    if a.method != "rotstar" and r.corners.reasons is not None and r.corners.n_valid < nx_ny:
+        why = f" ({a.method}: {reason_counts(r.corners.reasons)})"
+    elif r.corners.n_valid < nx_ny:
+        why = f" ({r.corners.missing_summary()})"
+    progress.step(r.pose, f"{r.corners.n_valid} of {nx_ny} corners{why}")
+
+
+def say_checks(a, det) -> None:
+    """The dataset's checks: poses whose camera moved, the display offsets, boards labelled unlike"""
+    multi = det.dataset.multi_camera
+    for k, d in det.cameras.items():
+        for r in d.rejected:
+            say(f"{r.pose}: skipped: {r.error}")
+        if a.refine == "symmetric" and not (multi and a.quiet):
+            say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{d.display.summary()}")
+    for pose, why in det.disagree.items():
+        say(f"{pose}: skipped in every camera: {why}")
+
+
+def say_boards(det, sparse) -> int:
+    """The boards written as none, and the boards mrcal will use; EXIT_FAILED when there is none"""
+    ds = det.dataset
+    pose_of = {r.file: r.pose for r in det.results()}
+    for s in sparse:
+        say(sparse_line(pose_of.get(s.file, s.file), s))
+    if not ds.multi_camera:
+        say(summary_line(len(det.kept[0]), len(det.cameras[0].results) + len(ds.unmatched), len(sparse)))
+    for k in ds.cameras if ds.multi_camera else []:
+        say(f"rotstar-detect: {dataset.camera_folder(k)}: {len(det.kept[k])} of {len(ds.pose_names)} poses gave a "
+            f"board ({ds.sizes[k][0]}x{ds.sizes[k][1]})")
+    return 0 if any(det.kept.values()) else EXIT_FAILED
+
+
+def say_command(a, det, real: bool) -> int:
+    """The mrcal-calibrate-cameras command to run next (unless --no-hint), or why there is none"""
+    ds = det.dataset
+    if det.thin:
+        k = det.thin[0]
+        say(f"rotstar-detect: {dataset.camera_folder(k)}: {len(det.kept[k])} board(s); mrcal needs at least "
+            "2 per camera to match the cameras' instants (record more poses in its view); no command to print")
+        return EXIT_FAILED
+    sizes = det.cameras[0].sizes
+    if not ds.multi_camera and len(sizes) > 1:
+        say(f"rotstar-detect: warning: poses have different image sizes {sizes}")
+    if a.no_hint:
+        return 0
+    if not real:
+        say("rotstar-detect: stdout is not a file: save the corners (rotstar-detect ... > corners.vnl, or -o) "
+            "and put that file's name for corners.vnl below")
+    if not ds.multi_camera:
+        say("next, calibrate with:\n  " + det.command)
+    else:
+        if len(set(ds.sizes.values())) > 1:
+            say("rotstar-detect: the cameras' image sizes differ, so the command gives no --imagersize (it applies "
+                "to every camera): mrcal reads each camera's size from its first image; run it from this folder")
+        say(f"next, calibrate the {len(ds.cameras)} cameras at once with:\n  " + det.command)
+    return 0
+
+
 def write_output(output: str | None, boards, weights):
     """The corners to the file `output` (atomically) or to stdout; write_corners' sparse boards"""
     if output:
@@ -137,174 +239,22 @@ def write_output(output: str | None, boards, weights):
     return write_corners(sys.stdout, boards, weights)
 
 
-def fall_back_to_rotstar(a) -> bool:
+def fall_back_to_rotstar(a, ds: dataset.Dataset) -> bool:
     """--method phase|star on a sequence without their frames: say so, and detect rotstar's corners instead
 
     The corners are still written (a calibration can go on), the exit status
     is 1 (the method asked for did not run), and the message says which
     corners the output holds.
     """
-    from rotstar_mrcal.detect.run import missing_frames
-
     if a.method == "rotstar":
         return False
-    try:
-        _, layout = dataset.read_pattern(a.seq)
-    except dataset.DatasetError:
-        return False  # the detection reports it
-    what = missing_frames(layout, a.method)
+    what = missing_frames(ds.layout, a.method)
     if what:
         say(f"rotstar-detect: {dataset.pattern_file(a.seq)}: the sequence has no {what} (it was recorded without "
             f"rotstar-pattern --paper-sequence): --method {a.method} cannot run; writing the rotating-star corners "
             f"(--method rotstar) instead, exit status 1")
         a.method = "rotstar"
     return bool(what)
-
-
-def _main(argv=None) -> int:
-    a = parse_args(argv)
-    fell_back = fall_back_to_rotstar(a)
-    if dataset.is_multi_camera(a.seq):
-        rc = _main_rig(a)
-        return EXIT_FAILED if fell_back and rc == 0 else rc
-    progress = None
-
-    def report(r):
-        if r.found:
-            why = ""
-            if a.method != "rotstar" and r.corners.reasons is not None and r.corners.n_valid < layout.nx * layout.ny:
-                from rotstar_mrcal.peers.registry import reason_counts
-
-                why = f" ({a.method}: {reason_counts(r.corners.reasons)})"
-            elif r.corners.n_valid < layout.nx * layout.ny:
-                why = f" ({r.corners.missing_summary()})"
-            progress.step(r.pose, f"{r.corners.n_valid} of {layout.nx * layout.ny} corners{why}")
-        else:
-            progress.step(r.pose, f"skipped: {r.error}", important=True)
-
-    try:
-        pattern, layout = dataset.read_pattern(a.seq)
-        frames = pattern["frames"]
-        poses = dataset.list_poses(a.seq, frames)
-        unmatched = dataset.unmatched_folders(a.seq, frames)
-    except dataset.DatasetError as e:
-        fail(str(e))
-    if not poses:
-        why = f" ({next(iter(unmatched.values()))})" if unmatched else ""
-        fail(f"{a.seq}: no pose folders with frames from pattern.json{why}")
-    if a.output:  # never over an input: pattern.json, a frame, anything in a pose folder
-        check_output_path(a.output, [os.path.join(a.seq, "pattern.json")]
-                          + [os.path.join(a.seq, p) for p in poses + list(unmatched)])
-    progress = Progress(len(poses) + len(unmatched), a.quiet)
-    for name, msg in unmatched.items():
-        progress.step(name, f"skipped: {msg}", important=True)
-    try:
-        det = detect_dataset(a.seq, window=a.window, refine=a.refine, max_motion=a.max_motion, jobs=a.jobs,
-                             poses=poses, progress=report, method=a.method)
-    except dataset.DatasetError as e:
-        fail(str(e))
-    for r in det.rejected:
-        say(f"{r.pose}: skipped: {r.error}")
-    if a.refine == "symmetric":
-        say(f"rotstar-detect: {det.display.summary()}")
-    sparse = write_output(a.output, det.boards(), det.weights() if a.weights else None)
-    dropped = {s.file for s in sparse}
-    pose_of = {r.file: r.pose for r in det.results}
-    for s in sparse:
-        say(sparse_line(pose_of.get(s.file, s.file), s))
-    found = [r.corners.corners for r in det.found if r.file not in dropped]
-    say(summary_line(len(found), len(det.results) + len(unmatched), len(sparse)))
-    if not found:
-        return EXIT_FAILED
-    sizes = det.sizes
-    if len(sizes) > 1:
-        say(f"rotstar-detect: warning: poses have different image sizes {sizes}")
-    imagersize = sizes[0]
-    focal = estimate_focal(found, layout.board_points()[..., :2], imagersize)
-    first_frame = next(f["file"] for f in det.pattern["frames"] if f["kind"] == "rotstar")
-    glob = os.path.join(a.seq, "*", first_frame)
-    vnl_name, real = corners_name(a.output)
-    cmd = mrcal_command(layout, imagersize, focal, vnl_name, glob, a.weights)
-    if not a.no_hint:
-        if not real:
-            say("rotstar-detect: stdout is not a file: save the corners (rotstar-detect ... > corners.vnl, or -o) "
-                "and put that file's name for corners.vnl below")
-        say("next, calibrate with:\n  " + cmd)
-    return EXIT_FAILED if fell_back else 0
-
-
-def _main_rig(a) -> int:
-    """rotstar-detect on a multi-camera dataset (detect.rig)"""
-    from rotstar_mrcal.detect.rig import detect_rig
-    from rotstar_mrcal.calibrate.rig import rig_argv, rig_globs
-    from rotstar_mrcal.calibrate.solve import LEAN_LENSMODEL, command_line
-    from rotstar_mrcal.vnl import mrcal_keeps
-
-    try:
-        pattern, layout = dataset.read_pattern(a.seq)
-        rig = dataset.read_rig(a.seq, pattern["frames"])
-    except dataset.DatasetError as e:
-        fail(str(e))
-    if a.output:
-        check_output_path(a.output, [os.path.join(a.seq, "pattern.json")]
-                          + [os.path.join(a.seq, p) for p in rig.pose_names])
-    nx_ny = layout.nx * layout.ny
-    progress = Progress(sum(len(v) for v in rig.poses.values()), a.quiet)
-
-    def report(k, r):
-        if r.found:
-            why = f" ({r.corners.missing_summary()})" if r.corners.n_valid < nx_ny and a.method == "rotstar" else ""
-            progress.step(r.pose, f"{r.corners.n_valid} of {nx_ny} corners{why}")
-        else:
-            progress.step(r.pose, f"skipped: {r.error}", important=True)
-
-    for k in rig.cameras:
-        if rig.absent[k] and not a.quiet:
-            say(f"rotstar-detect: {dataset.camera_folder(k)} has no folder in {len(rig.absent[k])} pose(s) "
-                f"({', '.join(rig.absent[k][:4])}{' ...' if len(rig.absent[k]) > 4 else ''}): no board there")
-    try:
-        det = detect_rig(a.seq, window=a.window, refine=a.refine, max_motion=a.max_motion, jobs=a.jobs,
-                         progress=report, method=a.method, rig=rig)
-    except dataset.DatasetError as e:
-        fail(str(e))
-    for k, d in det.cameras.items():
-        for r in d.rejected:
-            say(f"{r.pose}: skipped: {r.error}")
-        if a.refine == "symmetric" and not a.quiet:
-            say(f"rotstar-detect: {dataset.camera_folder(k)}: {d.display.summary()}")
-    for pose, why in det.disagree.items():
-        say(f"{pose}: skipped in every camera: {why}")
-    sparse = write_output(a.output, det.boards(), det.weights() if a.weights else None)
-    for s in sparse:
-        say(sparse_line(os.path.relpath(os.path.dirname(s.file), a.seq), s))
-    dropped = {s.file for s in sparse}
-    found = {k: [r for r in det.found(k) if r.file not in dropped and mrcal_keeps(r.corners.corners)]
-             for k in rig.cameras}
-    for k in rig.cameras:
-        say(f"rotstar-detect: {dataset.camera_folder(k)}: {len(found[k])} of {len(rig.pose_names)} poses gave a "
-            f"board ({rig.sizes[k][0]}x{rig.sizes[k][1]})")
-    if not any(found.values()):
-        return EXIT_FAILED
-    thin = [k for k in rig.cameras if len(found[k]) < 2]
-    if thin:
-        say(f"rotstar-detect: {dataset.camera_folder(thin[0])}: {len(found[thin[0]])} board(s); mrcal needs at least "
-            "2 per camera to match the cameras' instants (record more poses in its view); no command to print")
-        return EXIT_FAILED
-    focals = {k: estimate_focal([r.corners.corners for r in found[k]], layout.board_points()[..., :2],
-                                rig.sizes[k]) for k in rig.cameras}
-    first_frame = next(f["file"] for f in pattern["frames"] if f["kind"] == "rotstar")
-    vnl_name, real = corners_name(a.output)
-    cmd = command_line(rig_argv(vnl_name, layout, rig.sizes, focals, LEAN_LENSMODEL, ".",
-                                rig_globs(a.seq, rig.cameras, first_frame), a.weights))
-    if not a.no_hint:
-        if not real:
-            say("rotstar-detect: stdout is not a file: save the corners (rotstar-detect ... > corners.vnl, or -o) "
-                "and put that file's name for corners.vnl below")
-        if len(set(rig.sizes.values())) > 1:
-            say("rotstar-detect: the cameras' image sizes differ, so the command gives no --imagersize (it applies "
-                "to every camera): mrcal reads each camera's size from its first image; run it from this folder")
-        say(f"next, calibrate the {len(rig.cameras)} cameras at once with:\n  " + cmd)
-    return 0
 
 
 if __name__ == "__main__":

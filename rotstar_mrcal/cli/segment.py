@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -14,7 +15,7 @@ import numpy as np
 from rotstar_mrcal import dataset
 from rotstar_mrcal.capture.backend_replay import ReplaySource, stereo_raw
 from rotstar_mrcal.capture.pose import quick_check, value_scale, write_segmented
-from rotstar_mrcal.capture.rig_segment import check_recordings, segment_rig
+from rotstar_mrcal.capture.rig_segment import RigSegmentation, check_recordings, segment_rig
 from rotstar_mrcal.capture.segment import SegmentError, segment
 from rotstar_mrcal.capture.source import CaptureError
 from rotstar_mrcal.cli.segment_args import add_segment_options, options_from
@@ -93,7 +94,7 @@ def parse_args(argv=None):
 
 def plot_signal(fn: str, seg, title: str) -> None:
     """The difference signal with the threshold, the stretches and the frames averaged"""
-    import matplotlib
+    import matplotlib  # matplotlib.pyplot costs 2.1 s to import (-X importtime): only with --plot
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -138,91 +139,145 @@ def camera_recordings(paths: list[str]) -> list[str]:
 
 
 def _main(argv=None) -> int:
+    """parse -> read the recordings -> split them -> write the pose folder (and check it) -> print its name
+
+    One camera is a rig of one, written as OUT/<file> (its split: capture.segment.segment); several cameras
+    (or --stereo) are written as OUT/camera-<k>/ (capture.rig_segment.segment_rig).
+    """
     a = parse_args(argv)
+    names = camera_names(a)
+    pattern, layout = read_pattern_for(a)
+    out = check_outputs(a, pattern, names)
+    cams = load_cameras(a, names)
+    rs = split(a, cams, pattern, layout, names)
+    try:
+        with whole_or_none(out) if names else contextlib.nullcontext():  # no new pose folder with some cameras
+            for k, (c, seg) in enumerate(zip(cams, rs.cameras)):
+                folder = write_camera(a, out, names[k] if names else "", c, seg, pattern, layout,
+                                      names[rs.reference] if names else "")
+    except (dataset.DatasetError, OSError, ValueError) as e:
+        fail(str(e))
+    out_line(out if names else folder)
+    return 0
+
+
+def camera_names(a) -> list[str]:
+    """The camera folders to write, camera-0, camera-1, ...; [] for one camera (written as the pose folder)"""
     a.recording = camera_recordings(a.recording)
     a.stereo = a.stereo or (a.fourcc or "").strip().upper() == "Y12I"
     if a.stereo and len(a.recording) != 1:
         fail("--stereo splits one raw dump of both imagers; give one recording")
-    if len(a.recording) > 1 or a.stereo:
-        return _main_rig(a)
-    a.recording = a.recording[0]
+    if len(a.recording) == 1 and not a.stereo:
+        return []
+    return [f"camera-{k}" for k in range(2 if a.stereo else len(a.recording))]
+
+
+def read_pattern_for(a) -> tuple[dict, object]:
+    """(pattern.json, its Layout) of --pattern, read once; fail() on one that cannot be read"""
     try:
-        pattern, layout = dataset.read_pattern(a.pattern)
+        return dataset.read_pattern(a.pattern)
     except dataset.DatasetError as e:
         fail(str(e))
+
+
+def check_outputs(a, pattern: dict, names: list[str]) -> str:
+    """The pose folder to write (normalised): never over an input, nor over frames without --force"""
     out = os.path.normpath(a.out)
-    seq, pose = os.path.dirname(out) or ".", os.path.basename(out)
-    inputs = [a.recording, dataset.pattern_file(a.pattern)]
-    if a.reference not in (None, 0):
+    inputs = list(a.recording) + [dataset.pattern_file(a.pattern)]
+    if not names and a.reference not in (None, 0):
         fail("--reference is for several cameras' recordings")
     check_output_path(out, inputs, folder=True)
-    if a.plot:
+    if names and a.reference is not None and not 0 <= a.reference < len(names):
+        fail(f"--reference {a.reference}: there are cameras 0-{len(names) - 1}")
+    if a.plot and not names:
         check_output_path(a.plot, inputs)
-    names = {f["file"] for f in pattern["frames"]}
-    if os.path.isdir(out) and names & set(os.listdir(out)) and not a.force:
-        fail(f"{out} already holds frames (use --force to overwrite)")
+    files = {f["file"] for f in pattern["frames"]}
+    busy = [n for n in names or [""] if os.path.isdir(os.path.join(out, n))
+            and files & set(os.listdir(os.path.join(out, n)))]
+    if busy and not a.force:
+        fail(f"{os.path.join(out, busy[0]) if names else out} already holds frames (use --force to overwrite)")
+    return out
+
+
+def dropped_frames(sequence) -> int:
+    """Camera frames missing from a recording: the gaps in its sequence numbers
+
+    >>> dropped_frames([3, 4, 6, 9]), dropped_frames([5])
+    (3, 0)
+    """
+    seq = np.asarray(sequence, np.int64)
+    return int(np.sum(np.maximum(np.diff(seq) - 1, 0))) if len(seq) > 1 else 0
+
+
+def split(a, cams: list, pattern: dict, layout, names: list[str]):
+    """Every camera's recording split at the same frame boundaries (rig_segment.RigSegmentation), said on stderr"""
     try:
-        src = ReplaySource(a.recording, size=a.size, fourcc=a.fourcc)
-        frames = src.frames()
-    except CaptureError as e:
-        fail(str(e))
-    for note in src.notes:
-        say(f"rotstar-segment: note: {note}")
-    say(f"rotstar-segment: {a.recording}: {len(frames)} frames of {frames.shape[2]}x{frames.shape[1]}, "
-        f"{'16' if src.full_scale == 65535 else '8'}-bit")
-    seqnums = src.sequence_numbers()
-    gaps = int(sum(max(int(b) - int(a_) - 1, 0) for a_, b in zip(seqnums[:-1], seqnums[1:])))
-    if gaps:
-        say(f"rotstar-segment: note: {gaps} camera frame(s) were dropped (gaps in the sequence numbers)")
-    try:
-        seg = segment(frames, pattern["frames"], layout, src.full_scale, options_from(a))
+        if names:
+            check_recordings([c.frames for c in cams], [f"{n} ({c.what})" for n, c in zip(names, cams)])
     except SegmentError as e:
-        fail(f"{a.recording}: {e}", EXIT_FAILED)
+        fail(str(e))
+    try:
+        if names:
+            rs = segment_rig([c.frames for c in cams], pattern["frames"], layout, [c.full_scale for c in cams],
+                             options_from(a), a.reference, names)
+        else:
+            rs = RigSegmentation([segment(cams[0].frames, pattern["frames"], layout, cams[0].full_scale,
+                                          options_from(a))], 0, [])
+    except SegmentError as e:
+        fail(str(e) if names else f"{a.recording[0]}: {e}", EXIT_FAILED)
     except CaptureError as e:
         fail(str(e))
-    say(f"rotstar-segment: {seg.summary()}")
-    for v in seg.loops:
+    say(f"rotstar-segment: {rs.summary() if names else rs.cameras[0].summary()}")
+    for v in [] if names else rs.cameras[0].loops:
         if not v.ok:
-            say(f"rotstar-segment:   loop at frame {seg.stretches[v.marker].start} not used: {v.reason}")
-    if a.scale == "auto":
-        scale, note = value_scale(max(float(np.max(img)) for img in seg.images.values()), src.full_scale)
-        if note:
-            say(f"rotstar-segment: note: {note}")
-    else:
-        scale = float(a.scale)
-    try:
-        folder = write_segmented(seq, pose, seg, pattern, src.full_scale, scale,
-                                 {"recording": os.path.abspath(a.recording), "dropped_camera_frames": gaps})
-    except (dataset.DatasetError, OSError, ValueError) as e:
-        fail(str(e))
-    if a.plot:
-        plot_signal(a.plot, seg, a.recording)
+            say(f"rotstar-segment:   loop at frame {rs.cameras[0].stretches[v.marker].start} not used: {v.reason}")
+    for n in rs.notes:
+        say(f"rotstar-segment: note: {n}")
+    return rs
+
+
+def write_camera(a, out: str, name: str, c, seg, pattern: dict, layout, reference: str) -> str:
+    """One camera's frames into OUT/ (one camera) or OUT/camera-<k>/, with its --plot and quick check"""
+    scale = _scale(a, seg, c.full_scale, name)
+    extra = {"recording": c.what, "dropped_camera_frames": dropped_frames(c.sequence)}
+    if name:
+        extra.update(camera=name, boundaries_from=reference)
+    pose = f"{os.path.basename(out)}/{name}" if name else os.path.basename(out)
+    folder = write_segmented(os.path.dirname(out) or ".", pose, seg, pattern, c.full_scale, scale, extra)
+    if a.plot and not name:
+        plot_signal(a.plot, seg, a.recording[0])
         say(f"rotstar-segment: wrote {a.plot}")
     if not a.no_check:
-        r = quick_check(seg, layout, pattern, src.full_scale / scale)  # the averages are not scaled yet
-        n = layout.nx * layout.ny
-        if r.found:
-            say(f"rotstar-segment: board found: {r.n_valid} of {n} corners"
-                + (" (complete)" if r.n_valid == n else "") + f", frames agree to {r.motion_px:.3f} px")
-        else:
-            say(f"rotstar-segment: no board: {r.error}")
-        with open(os.path.join(folder, "segment.json")) as f:
-            info = json.load(f)
-        info["quick_check"] = {"found": r.found, "corners": r.n_valid, "error": r.error, "motion_px": r.motion_px}
-        with atomic_write(os.path.join(folder, "segment.json")) as f:
-            json.dump(info, f, indent=1, default=float)
-            f.write("\n")
-    out_line(folder)
-    return 0
+        record_check(folder, name, quick_check(seg, layout, pattern, c.full_scale / scale), layout)
+    return folder
+
+
+def record_check(folder: str, name: str, r, layout) -> None:
+    """The quick check's verdict on stderr and in the folder's segment.json"""
+    n = layout.nx * layout.ny
+    if name:
+        say(f"rotstar-segment: {name}: board found: {r.n_valid} of {n} corners" if r.found
+            else f"rotstar-segment: {name}: no board: {r.error}")
+    elif r.found:
+        say(f"rotstar-segment: board found: {r.n_valid} of {n} corners"
+            + (" (complete)" if r.n_valid == n else "") + f", frames agree to {r.motion_px:.3f} px")
+    else:
+        say(f"rotstar-segment: no board: {r.error}")
+    with open(os.path.join(folder, "segment.json")) as f:
+        info = json.load(f)
+    info["quick_check"] = {"found": r.found, "corners": r.n_valid, "error": r.error, "motion_px": r.motion_px}
+    with atomic_write(os.path.join(folder, "segment.json")) as f:
+        json.dump(info, f, indent=1, default=float)
+        f.write("\n")
 
 
 def _scale(a, seg, full_scale: float, what: str) -> float:
-    """The factor 16-bit values are written with (--scale; auto: value_scale), with its note"""
+    """The factor 16-bit values are written with (--scale; auto: value_scale), with its note (naming the camera)"""
     if a.scale != "auto":
         return float(a.scale)
     scale, note = value_scale(max(float(np.max(img)) for img in seg.images.values()), full_scale)
     if note:
-        say(f"rotstar-segment: note: {what}: {note}")
+        say(f"rotstar-segment: note: {what + ': ' if what else ''}{note}")
     return scale
 
 
@@ -235,8 +290,8 @@ class CameraRecording:
     notes: list
 
 
-def load_cameras(a) -> list[CameraRecording]:
-    """Every camera's recording: one file each, or the two imagers of one raw dump (--stereo)"""
+def load_cameras(a, names: list[str]) -> list[CameraRecording]:
+    """Every camera's recording (one file each, or the two imagers of one raw dump: --stereo), said on stderr"""
     try:
         if a.stereo:
             if not a.size or not a.fourcc:
@@ -244,89 +299,31 @@ def load_cameras(a) -> list[CameraRecording]:
             views = stereo_raw(a.recording[0], a.size, a.fourcc)
             fs = 65535.0 if views[0].dtype == np.uint16 else 255.0
             path = os.path.abspath(a.recording[0])
-            return [CameraRecording(f"{path} ({side} imager)", v, fs, np.arange(len(v)), [])
+            cams = [CameraRecording(f"{path} ({side} imager)", v, fs, np.arange(len(v)), [])
                     for side, v in zip(("left", "right"), views)]
-        out = []
-        for fn in a.recording:
-            src = ReplaySource(fn, size=a.size, fourcc=a.fourcc)
-            frames = src.frames()
-            if hasattr(frames, "check_sizes"):
-                frames.check_sizes()
-            out.append(CameraRecording(os.path.abspath(fn), frames, src.full_scale, src.sequence_numbers(),
-                                       src.notes))
-        return out
+        else:
+            cams = [load_recording(a, fn, rig=bool(names)) for fn in a.recording]
     except CaptureError as e:
         fail(str(e))
-
-
-def _main_rig(a) -> int:
-    """Several cameras' recordings -> OUT/camera-<k>/ split with the same frame boundaries"""
-    try:
-        pattern, layout = dataset.read_pattern(a.pattern)
-    except dataset.DatasetError as e:
-        fail(str(e))
-    out = os.path.normpath(a.out)
-    seq, pose = os.path.dirname(out) or ".", os.path.basename(out)
-    inputs = list(a.recording) + [dataset.pattern_file(a.pattern)]
-    check_output_path(out, inputs, folder=True)
-    n_cam = 2 if a.stereo else len(a.recording)
-    if a.reference is not None and not 0 <= a.reference < n_cam:
-        fail(f"--reference {a.reference}: there are cameras 0-{n_cam - 1}")
-    names = [f"camera-{k}" for k in range(n_cam)]
-    files = {f["file"] for f in pattern["frames"]}
-    busy = [n for n in names if os.path.isdir(os.path.join(out, n)) and files & set(os.listdir(os.path.join(out, n)))]
-    if busy and not a.force:
-        fail(f"{os.path.join(out, busy[0])} already holds frames (use --force to overwrite)")
-    cams = load_cameras(a)
-    for name, c in zip(names, cams):
+    for k, c in enumerate(cams):
         for note in c.notes:
             say(f"rotstar-segment: note: {note}")
-        say(f"rotstar-segment: {name}: {c.what}: {len(c.frames)} frames of {c.frames.shape[2]}x{c.frames.shape[1]}, "
+        what = f"{names[k]}: {c.what}" if names else a.recording[0]
+        say(f"rotstar-segment: {what}: {len(c.frames)} frames of {c.frames.shape[2]}x{c.frames.shape[1]}, "
             f"{'16' if c.full_scale == 65535 else '8'}-bit")
-    frames = [c.frames for c in cams]
-    try:
-        check_recordings(frames, [f"{n} ({c.what})" for n, c in zip(names, cams)])
-    except SegmentError as e:
-        fail(str(e))
-    try:
-        rs = segment_rig(frames, pattern["frames"], layout, [c.full_scale for c in cams], options_from(a),
-                         a.reference, names)
-    except SegmentError as e:
-        fail(str(e), EXIT_FAILED)
-    except CaptureError as e:
-        fail(str(e))
-    say(f"rotstar-segment: {rs.summary()}")
-    for n in rs.notes:
-        say(f"rotstar-segment: note: {n}")
-    try:
-        with whole_or_none(out):  # an interrupt leaves no new pose folder with some of its cameras
-            _write_rig(a, out, seq, pose, names, cams, rs, pattern, layout)
-    except (dataset.DatasetError, OSError, ValueError) as e:
-        fail(str(e))
-    out_line(out)
-    return 0
+    gaps = dropped_frames(cams[0].sequence)
+    if gaps and not names:
+        say(f"rotstar-segment: note: {gaps} camera frame(s) were dropped (gaps in the sequence numbers)")
+    return cams
 
 
-def _write_rig(a, out, seq, pose, names, cams, rs, pattern, layout) -> None:
-    """Every camera's frames into OUT/camera-<k>/, with its quick check"""
-    for name, c, seg in zip(names, cams, rs.cameras):
-        scale = _scale(a, seg, c.full_scale, name)
-        gaps = int(np.sum(np.maximum(np.diff(c.sequence) - 1, 0))) if len(c.sequence) > 1 else 0
-        folder = write_segmented(seq, f"{pose}/{name}", seg, pattern, c.full_scale, scale,
-                                 {"recording": c.what, "dropped_camera_frames": gaps,
-                                  "camera": name, "boundaries_from": names[rs.reference]})
-        if not a.no_check:
-            r = quick_check(seg, layout, pattern, c.full_scale / scale)
-            n = layout.nx * layout.ny
-            say(f"rotstar-segment: {name}: board found: {r.n_valid} of {n} corners" if r.found
-                else f"rotstar-segment: {name}: no board: {r.error}")
-            with open(os.path.join(folder, "segment.json")) as f:
-                info = json.load(f)
-            info["quick_check"] = {"found": r.found, "corners": r.n_valid, "error": r.error,
-                                   "motion_px": r.motion_px}
-            with atomic_write(os.path.join(folder, "segment.json")) as f:
-                json.dump(info, f, indent=1, default=float)
-                f.write("\n")
+def load_recording(a, fn: str, rig: bool) -> CameraRecording:
+    """One camera's recording (capture.backend_replay.ReplaySource); a rig's frames checked for one size"""
+    src = ReplaySource(fn, size=a.size, fourcc=a.fourcc)
+    frames = src.frames()
+    if rig and hasattr(frames, "check_sizes"):
+        frames.check_sizes()
+    return CameraRecording(os.path.abspath(fn), frames, src.full_scale, src.sequence_numbers(), src.notes)
 
 
 if __name__ == "__main__":

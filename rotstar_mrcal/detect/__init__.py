@@ -24,15 +24,35 @@ The stages, in the paper's order (section 3):
                      the camera does
 
     pipeline         one pose through the stages: detect_pose
-    run              a whole dataset: detect_dataset
-    rig              several cameras' poses, their labelling checked across
-                     cameras
+    run              a whole dataset (dataset.open_dataset), one camera or
+                     several: detect_dataset -> Detection (corners, per-pose
+                     reasons, focal seeds, mrcal's command)
+    rig              several cameras: each board's labelling checked across
+                     the cameras
 
 The methods rotstar is compared against are in rotstar_mrcal.peers. See
 doc/detector.md.
 """
 
-from rotstar_mrcal.detect.pipeline import detect_pose
-from rotstar_mrcal.detect.run import detect_dataset
+import importlib
 
 __all__ = ["detect_pose", "detect_dataset"]
+_HOME = {"detect_pose": "rotstar_mrcal.detect.pipeline", "detect_dataset": "rotstar_mrcal.detect.run"}
+
+
+def __getattr__(name: str):
+    """detect_pose and detect_dataset, imported when first asked for (PEP 562, as scikit-image's lazy_loader)
+
+    Importing a stage (rotstar_mrcal.detect.elements, which the simulator
+    uses) runs this package's __init__ first: an eager re-export here would
+    make every stage import the whole pipeline, the dataset runner and,
+    through it, calibrate/ (the mrcal command), a circle through every
+    package that uses one stage.
+    """
+    if name in _HOME:
+        return getattr(importlib.import_module(_HOME[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + __all__)

@@ -4,7 +4,7 @@ SYNOPSIS
 
     from rotstar_mrcal.detect.elements import by_identity
     found = by_identity(frames, identity, layout, window=10.0)
-    if isinstance(found, str): ...          # why the pose has no board
+    found.error                              # '' or why the pose has no board (then no element)
     found.labels, found.rough, found.window  # (N, 2) (i, j), (N, 2) px, (N,) px
     found.rejected                           # {(i, j): why} for elements seen but not kept
     found.unplaced                           # why, for elements whose identity was not read
@@ -63,6 +63,16 @@ class LabelledElements:
     rejected: dict = dataclasses.field(default_factory=dict)  # {(i, j): why}
     unplaced: list = dataclasses.field(default_factory=list)  # why, per element whose identity was not read
     by_identity: bool = False  # labelled by the identity codes (else by the element graph)
+    error: str = ""  # '' or why the pose gives no board (then no element)
+
+
+def no_board(why: str) -> LabelledElements:
+    """No labelled element, and why the pose gives no board
+
+    >>> e = no_board("board partly out of view"); e.error, e.labels.shape
+    ('board partly out of view', (0, 2))
+    """
+    return LabelledElements(np.zeros((0, 2), int), np.zeros((0, 2)), np.zeros(0), error=why)
 
 
 def window_of(contour: np.ndarray, centre: np.ndarray, shape, window: float) -> float:
@@ -113,20 +123,21 @@ def misordered_reason(fault: tuple, layout: Layout) -> str:
             "pattern.json's order)")
 
 
-def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window: float):
-    """LabelledElements from the identity frames, or a one-line reason; see the module doc"""
+def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window: float) -> LabelledElements:
+    """LabelledElements from the identity frames (.error: '' or a one-line reason); see the module doc"""
     H, W = frames.shape[1:]
     ids = read_identities(frames, identity, layout.identity_code)
     if ids.misordered:
-        return misordered_reason(ids.misordered, layout)
+        return no_board(misordered_reason(ids.misordered, layout))
     read = ids.index >= 0
     unplaced = list(ids.reason[~read])
     if read.sum() < 4:
         seen = len(ids.index)
         if seen == 0:
-            return "no identity frames that show elements (no element changes between the identity frames)"
-        return (f"identities of {read.sum()} of {seen} elements read; {unplaced[0] if unplaced else ''}"
-                .rstrip("; "))
+            return no_board("no identity frames that show elements "
+                            "(no element changes between the identity frames)")
+        return no_board(f"identities of {read.sum()} of {seen} elements read; {unplaced[0] if unplaced else ''}"
+                        .rstrip("; "))
     labels = ids.labels(layout.nx)[read]
     cs = [c for c, r in zip(ids.contours, read) if r]
     cen = ids.centroids[read]
@@ -166,22 +177,22 @@ def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window
         grid = grid_array(labels[keep], rough[keep], layout.nx, layout.ny)
         why = handedness_reason(grid)  # labelled right by the codes, but no rotation fits a mirrored board
         if why:
-            return why
+            return no_board(why)
         phi = frame_angles(frames, grid, layout.half_element / layout.pitch)
         why = order_reason(phi, layout.step) or mirror_reason(phi, layout.step)
         if why:
-            return why
+            return no_board(why)
     # frame 0's colours: parity and the marker, as the graph path orients
     bad = keep & _parity_check(frames[0], labels, np.where(keep[:, None], rough, np.nan), layout)
     if bad.sum() > MAX_PARITY_DISAGREE * keep.sum():
-        return (f"the checker colours of frame 0 contradict the identities of {bad.sum()} of {keep.sum()} "
-                "elements (is the first rotating-star frame the one at angle 0?)")
+        return no_board(f"the checker colours of frame 0 contradict the identities of {bad.sum()} of {keep.sum()} "
+                        "elements (is the first rotating-star frame the one at angle 0?)")
     for lab in labels[bad]:
         rejected[tuple(lab)] = "frame 0's checker colours contradict its identity"
     keep &= ~bad
     if keep.sum() < 4:
-        return f"only {keep.sum()} elements whose identities agree with the image" + (
-            f" ({next(iter(rejected.values()))})" if rejected else "")
+        return no_board(f"only {keep.sum()} elements whose identities agree with the image" + (
+            f" ({next(iter(rejected.values()))})" if rejected else ""))
     labels, rough, cs = labels[keep], rough[keep], [c for c, k in zip(cs, keep) if k]
     w = np.array([window_of(c, q, (H, W), window) for c, q in zip(cs, rough)])
     inside = inside_image(rough, w, (H, W))
@@ -219,14 +230,14 @@ def element_count_reason(el, n_expected: int, layout: Layout) -> str:
     return f"{seen}: more elements than the grid of pattern.json (is it the pattern.json of this screen?)"
 
 
-def by_graph(frames: np.ndarray, layout: Layout, window: float):
-    """LabelledElements of a whole board from the element graph and the marker, or a one-line reason"""
+def by_graph(frames: np.ndarray, layout: Layout, window: float) -> LabelledElements:
+    """LabelledElements of a whole board from the element graph and the marker (.error: '' or a one-line reason)"""
     resp = response_map(frames)
     mask, _ = binarize(resp)
     el = element_boundaries(mask)
     why = element_count_reason(el, layout.nx * layout.ny, layout)
     if why:
-        return why
+        return no_board(why)
     H, W = frames.shape[1:]
     m = int(np.ceil(window)) + 4
     x0, y0 = np.maximum(el.lattice.min(axis=0) - m, 0)
@@ -253,12 +264,12 @@ def by_graph(frames: np.ndarray, layout: Layout, window: float):
                 raise e from None
         why = order_reason(frame_angles(frames, grid_array(labels, rough, layout.nx, layout.ny), hef), layout.step)
         if why:
-            return why
+            return no_board(why)
         labels = orient(labels, rough, frames[0], layout.nx, layout.ny, layout.marker)
     except GridError as e:
-        return str(e)
+        return no_board(str(e))
     why = mirror_reason(frame_angles(frames, grid_array(labels, rough, layout.nx, layout.ny), hef), layout.step)
     if why:
-        return why
+        return no_board(why)
     w = np.clip(WINDOW_FRACTION * inscribed, MIN_WINDOW, window)
     return LabelledElements(labels, rough + off, w)

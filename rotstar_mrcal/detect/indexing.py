@@ -40,6 +40,8 @@ from collections import deque
 import cv2
 import numpy as np
 
+from rotstar_mrcal.detect.nearest import knn_third_party, nearest_label  # scipy's EDT and k-d tree answers, without importing scipy
+
 
 class GridError(Exception):
     """The elements do not form the expected grid: the board is skipped"""
@@ -74,8 +76,6 @@ def contact_graph(contours: list, shape: tuple[int, int], lattice: np.ndarray | 
     (such as the paper's bounding-rectangle vertex distance) this holds
     under shear, steep perspective and blur.
     """
-    from rotstar_mrcal.detect.nearest import knn_third_party, nearest_label  # scipy's EDT and k-d tree answers, without importing scipy
-
     N = len(contours)
     if N == 0:
         return np.zeros((0, 0), bool), np.zeros((0, 0))
@@ -104,6 +104,8 @@ def contact_graph(contours: list, shape: tuple[int, int], lattice: np.ndarray | 
         kk = min(24, len(allpts))
         keep, ask = knn_third_party(allpts, owner, p, a, b, k=kk) if kk == 24 else (None, np.ones(len(p), bool))
         if ask.any():  # ties at the 24th distance that cKDTree's order decides
+            # scipy.spatial costs 0.5-0.8 s to import (python -X importtime), more than detecting
+            # a pose: imported only on such rare ties
             from scipy.spatial import cKDTree
 
             q = np.flatnonzero(ask)

@@ -2,19 +2,20 @@
 
 SYNOPSIS
 
-    from rotstar_mrcal import dataset
+    from rotstar_mrcal.dataset import open_dataset
     from rotstar_mrcal.detect.pipeline import detect_pose
-    _, layout = dataset.read_pattern("seq")
-    pose = dataset.load_pose("seq", "pose000", layout)
-    result = detect_pose(pose.rotstar, layout, full_scale=pose.full_scale,
+    ds = open_dataset("seq")
+    pose = ds.load("pose000")
+    result = detect_pose(pose.rotstar, ds.layout, full_scale=pose.full_scale,
                          checkerboard=pose.checkerboard)
+    # another refiner, as a value: detect_pose(..., refine=REFINERS["opencv"]) (peers.registry)
     result.corners      # (ny, nx, 2), NaN where a corner was rejected
     result.error        # '' or the one-line reason the board was skipped
 
 The stages (paper 3.2-3.3): response map -> element boundaries -> rough
 corners -> grid indexing and orientation -> refinement; with identity frames
 (issue 13) the elements are found and named by their identity codes instead
-of the response map and the element graph (labelled.py: by_identity,
+of the response map and the element graph (elements.py: by_identity,
 by_graph), so that boards partly out of view give the corners in view; with the checks that
 name what went wrong: exposure, the border bands' colour frame by frame
 (sequence.py: frames out of order), the element count (too small, hidden,
@@ -62,17 +63,18 @@ of the pose's median half-window.
 from __future__ import annotations
 
 import dataclasses
+import re
 
+import cv2
 import numpy as np
 
-from rotstar_mrcal.peers.registry import refiner
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.detect.consistency import refined_consistency
 from rotstar_mrcal.detect.display_offsets import (
     MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian,
 )
 from rotstar_mrcal.detect.elements import by_graph, by_identity
-from rotstar_mrcal.detect.refine import refine_each_frame, symmetric_refine
+from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_each_frame, symmetric_refine
 from rotstar_mrcal.detect.response import pixel_noise
 from rotstar_mrcal.detect.sequence import check_band_parity
 
@@ -106,8 +108,6 @@ class PoseCorners:
         >>> r.missing_summary()
         '1 not in view or hidden, 2 dropped (2 a), 1 identity not read'
         """
-        import re
-
         missing = ~np.isfinite(self.corners[..., 0])
         why = self.reasons[missing] if self.reasons is not None else np.zeros(0, object)
         named = [re.sub(r" \(.*\)$", "", str(w)) for w in why if w]
@@ -195,8 +195,6 @@ def prefilter(frames: np.ndarray, sigma: float = PREFILTER_SIGMA) -> np.ndarray:
         >>> round(float(g.sum()), 3), bool(g[0, 4, 4] == g.max()), g.dtype
         (1.0, True, dtype('float32'))
     """
-    import cv2
-
     frames = np.asarray(frames, np.float32)
     if sigma <= 0:
         return frames
@@ -227,7 +225,7 @@ def detect_pose(
     full_scale: float = 255.0,
     checkerboard: np.ndarray | None = None,
     window: float = 10.0,
-    refine: str = "symmetric",
+    refine: Refiner = SYMMETRIC,
     max_motion: float = MAX_MOTION,
     check_motion: bool = True,
     identity: np.ndarray | None = None,
@@ -258,8 +256,8 @@ def detect_pose(
         found = by_identity(frames, identity, layout, window)
     else:
         found = by_graph(frames, layout, window)
-    if isinstance(found, str):
-        return _fail(layout, found)
+    if found.error:
+        return _fail(layout, found.error)
     labels, w = found.labels, found.window
     # work on the corners' bounding box from here on (all stages are local)
     H, W = frames.shape[1:]
@@ -279,7 +277,7 @@ def detect_pose(
     cov = np.full((layout.ny, layout.nx, 2, 2), np.nan)
     motion = 0.0
     shifts = None
-    if refine == "symmetric":
+    if refine.needs == "rotstar":  # the paper's symmetric refinement, display offsets and motion check
         lowpass = prefilter(frames, min(prefilter_sigma, PREFILTER_PER_WINDOW * float(np.median(w))))
         res = symmetric_refine(lowpass, rough, w)
         if check_motion and res.ok.sum() >= 4:
@@ -293,22 +291,22 @@ def detect_pose(
         reasons[labels[:, 1], labels[:, 0]] = res.reason
         sigma[labels[:, 1], labels[:, 0]] = res.sigma
         cov[labels[:, 1], labels[:, 0]] = res.cov
-    elif refiner(refine).needs == "checkerboard":
+    elif refine.needs == "checkerboard":
         if checkerboard is None:
-            return _fail(layout, f"--refine {refine} needs the checkerboard frame, which this pose lacks")
+            return _fail(layout, f"--refine {refine.name} needs the checkerboard frame, which this pose lacks")
         cb = np.asarray(checkerboard, np.float32)[y0:y1, x0:x1]  # the same crop as the frames
         wi = max(int(np.floor(np.median(w))), 2)
-        q = refiner(refine).refine(cb, rough, wi)
+        q = refine.refine(cb, rough, wi)
         ok = np.isfinite(q).all(axis=1) & (np.linalg.norm(q - rough, axis=1) <= w)
         q = np.where(ok[:, None], q, np.nan)
-        reasons[labels[:, 1], labels[:, 0]] = np.where(ok, "", f"{refine} refinement failed")
+        reasons[labels[:, 1], labels[:, 0]] = np.where(ok, "", f"{refine.name} refinement failed")
     else:
-        raise ValueError(f"refiner {refine!r} has no place in detect_pose")
+        raise ValueError(f"refiner {refine.name!r} has no place in detect_pose")
 
     if found.by_identity:  # corners of partial views: checked against the others and against their neighbours
         q = q.copy()
         good = np.isfinite(q).all(axis=1)
-        if refine == "symmetric" and good.sum() >= 4:
+        if refine.needs == "rotstar" and good.sum() >= 4:
             ratio = res.sigma / np.median(res.sigma[good])
             odd = good & ~(ratio <= MAX_SIGMA_RATIO)
             reasons[labels[odd, 1], labels[odd, 0]] = [

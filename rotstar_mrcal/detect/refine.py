@@ -44,6 +44,7 @@ corner for that reason.
 from __future__ import annotations
 
 import dataclasses
+from typing import Callable
 
 import numpy as np
 
@@ -325,3 +326,39 @@ def _refine_group(sampler, nframes, q0, w, u, max_iter, tol, frame=None, shifts=
         cov[good] = np.linalg.inv(JtJ[good] + 1e-12 * np.eye(2)) * sigma2[good, None, None]
     q[~ok] = np.nan
     return Refined(q, ok, reason, np.sqrt(sigma2), cov, it)
+
+
+# ---------------------------------------------------------------------------
+# refiners by method, behind one interface: detect_pose takes one as a value
+# ---------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Refiner:
+    """A corner refiner: start corners (N, 2) on frames (K, H, W) -> (N, 2), NaN = failed
+
+    needs 'rotstar': the rotating-star frames jointly (detect_pose runs the
+    symmetric refinement with its display offsets and motion check);
+    'checkerboard': the checkerboard frame, one image at a time. The peers'
+    refiners and the table of all of them are in peers.registry (REFINERS).
+    """
+
+    name: str
+    needs: str  # 'rotstar' or 'checkerboard'
+    description: str
+    refine: Callable  # (frames (K, H, W), starts (N, 2), window) -> (N, 2), NaN = failed
+
+
+def refine_symmetric(frames, starts, window=10.0) -> np.ndarray:
+    """The paper's Eq. 1 (symmetric_refine) on all frames jointly
+
+    >>> y, x = np.mgrid[0:30, 0:30].astype(float)
+    >>> frames = (128 + 100 * np.tanh(x - 14.3) * np.tanh(y - 15.6))[None]
+    >>> np.round(refine_symmetric(frames, [[15.0, 15.0]], 6), 2)
+    array([[14.3, 15.6]])
+    """
+    return symmetric_refine(np.asarray(frames, np.float32), np.asarray(starts, float).reshape(-1, 2),
+                            window=window).corners
+
+
+SYMMETRIC = Refiner("symmetric", "rotstar", "the paper's point-symmetry fit (Eq. 1) on all frames jointly",
+                    refine_symmetric)
+"""The paper's refiner, detect_pose's default"""

@@ -1,16 +1,13 @@
-"""A multi-camera dataset: every camera's poses detected, and their labelling checked across cameras
+"""A multi-camera dataset: the boards' labelling checked across cameras
 
 SYNOPSIS
 
-    from rotstar_mrcal.detect.rig import detect_rig
-    det = detect_rig("seq", jobs=2)      # seq/poseNNN/camera-K/ (doc/dataset.md)
-    det.cameras[1].results               # camera 1's PoseResults (pose = 'poseNNN/camera-1')
-    det.boards()                         # [(file, (ny, nx, 2) or None)], every camera, for vnl.write_corners
-    det.disagree                         # poses whose boards are labelled differently in two cameras
+    from rotstar_mrcal.detect.rig import check_labelling
+    det.disagree = check_labelling({k: found_k, ...})   # what detect.run.detect_dataset does with >1 cameras
 
-Each camera is detected as a one-camera dataset whose pose folders are
-'poseNNN/camera-K' (run.detect_dataset, with its display and motion check
-per camera: the screen's offsets show in each camera's own pixels). Every
+Each camera is detected alike, its pose folders 'poseNNN/camera-K'
+(run.detect_dataset, with its display and motion check per camera: the
+screen's offsets show in each camera's own pixels). Every
 camera labels a board the same way by construction: the identity frames name
 each element and the orientation marker fixes which corner is (0, 0), in
 every camera alike. labelling_agrees checks it anyway, per pose and pair of
@@ -34,15 +31,10 @@ mislabelled board shows as a board whose corners mrcal mostly rejects
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 
-from rotstar_mrcal import dataset
-from rotstar_mrcal.vnl import mrcal_can_read
-from rotstar_mrcal.detect.display_offsets import MAX_MOTION
-from rotstar_mrcal.detect.run import DatasetCorners, PoseResult, detect_dataset
 
 MAX_TURN_DEG = 30.0
 """Largest angle between the board-x directions of one board in two cameras' images"""
@@ -95,48 +87,15 @@ def labelling_agrees(a: np.ndarray, b: np.ndarray, max_turn_deg: float = MAX_TUR
     return ""
 
 
-@dataclasses.dataclass
-class RigCorners:
-    """Every camera of a multi-camera dataset, detected, and the cross-camera labelling check"""
+def check_labelling(found: dict, max_turn_deg: float = MAX_TURN_DEG) -> dict[str, str]:
+    """{pose: why} for the poses whose boards are labelled differently in two cameras (labelling_agrees)
 
-    seq: str
-    rig: dataset.Rig
-    cameras: dict[int, DatasetCorners]
-    disagree: dict[str, str]  # pose -> why its boards were dropped from every camera
-
-    @property
-    def layout(self):
-        return self.cameras[0].layout
-
-    @property
-    def pattern(self):
-        return self.cameras[0].pattern
-
-    def results(self) -> list[tuple[int, PoseResult]]:
-        """(camera, result) for every camera's pose, camera by camera"""
-        return [(k, r) for k, d in self.cameras.items() for r in d.results]
-
-    def found(self, k: int) -> list[PoseResult]:
-        """Camera k's poses that gave a board (after the labelling check)"""
-        return [r for r in self.cameras[k].found if r.pose.split("/")[0] not in self.disagree]
-
-    def boards(self) -> list[tuple[str, np.ndarray | None]]:
-        """(file, corners or None) of every camera's poses, for vnl.write_corners"""
-        return [(r.file, r.corners.corners if self._kept(r) else None)
-                for _, r in self.results() if mrcal_can_read(r.file)]
-
-    def weights(self) -> list[np.ndarray | None]:
-        return [r.corners.weights() if self._kept(r) else None for _, r in self.results() if mrcal_can_read(r.file)]
-
-    def _kept(self, r: PoseResult) -> bool:
-        return r.found and r.pose.split("/")[0] not in self.disagree
-
-
-def check_labelling(cameras: dict[int, DatasetCorners], max_turn_deg: float = MAX_TURN_DEG) -> dict[str, str]:
-    """{pose: why} for the poses whose boards are labelled differently in two cameras (labelling_agrees)"""
-    by_pose: dict[str, list[tuple[int, PoseResult]]] = {}
-    for k, d in cameras.items():
-        for r in d.found:
+    found: {camera: [its PoseResults that gave a board]} (detect.run), pose
+    'poseNNN/camera-K'.
+    """
+    by_pose: dict[str, list] = {}
+    for k, rs in found.items():
+        for r in rs:
             by_pose.setdefault(r.pose.split("/")[0], []).append((k, r))
     out = {}
     for pose, rs in sorted(by_pose.items()):
@@ -147,20 +106,3 @@ def check_labelling(cameras: dict[int, DatasetCorners], max_turn_deg: float = MA
                 out[pose] = f"labelled differently in camera-{k0} and camera-{k}: {why}"
                 break
     return out
-
-
-def detect_rig(seq: str, *, window: float = 10.0, refine: str = "symmetric", max_motion: float = MAX_MOTION,
-               jobs: int = 1, progress=None, method: str = "rotstar", rig: dataset.Rig | None = None,
-               max_turn_deg: float = MAX_TURN_DEG) -> RigCorners:
-    """Detect every camera's poses of a multi-camera dataset (module doc); DatasetError for an unreadable layout
-
-    progress(camera, result) is called as each pose of each camera finishes.
-    """
-    frames = dataset.read_pattern(seq)[0]["frames"]
-    rig = dataset.read_rig(seq, frames) if rig is None else rig
-    cams = {}
-    for k in rig.cameras:
-        cams[k] = detect_dataset(seq, window=window, refine=refine, max_motion=max_motion, jobs=jobs,
-                                 poses=rig.poses[k], method=method,
-                                 progress=(lambda r, k=k: progress(k, r)) if progress else None)
-    return RigCorners(seq, rig, cams, check_labelling(cams, max_turn_deg))

@@ -1,22 +1,54 @@
-"""A whole dataset: every pose detected, then the display offsets told from camera motion
+"""A whole dataset, one camera or several: every pose detected, the display offsets, the mrcal command
 
 SYNOPSIS
 
-    from rotstar_mrcal.detect.run import detect_dataset
-    det = detect_dataset("seq", jobs=2)
-    det.display.summary()            # the screen's per-frame offsets, if any
-    for r in det.results:            # sorted by pose
-        r.pose, r.file, r.found, r.error
-    det.boards()                     # [(file, (ny, nx, 2) or None)] for vnl.write_corners
+    >>> from rotstar_mrcal.dataset import open_dataset
+    >>> from rotstar_mrcal.detect.run import detect_dataset
 
-Poses are detected independently (in worker processes with jobs > 1); the
-display offsets are then estimated over all poses that gave a board
-(detect.display.dataset_offsets) and a pose whose frames moved differently
-from the others is rejected as a camera that moved during the sequence,
-with how far it moved. Nothing here prints: `progress(result)` is called as
-each pose finishes (parallel.process_map: no worker outlives an interrupt),
-and the rejections after the dataset check are in
-`det.rejected`.
+    ds = open_dataset("seq")                     # read once (DatasetError: one line)
+    det = detect_dataset(ds, jobs=2)             # window=, refine=REFINERS[...], max_motion=, method=,
+                                                 # progress=, corners_file=, weights= (below)
+    det.boards()                     # [(file, (ny, nx, 2) or None)], every camera, for vnl.write_corners
+    det.weights()                    # the same boards' weights (--weights)
+    det.cameras[k]                   # camera k's DatasetCorners: .results (PoseResult per pose folder,
+                                     # sorted: r.pose, r.file, r.found, r.error), .display (the screen's
+                                     # offsets and motion verdicts: .summary()), .rejected (moved poses)
+    det.disagree                     # {poseNNN: why}: boards labelled differently in two cameras (dropped)
+    det.kept[k]                      # camera k's boards mrcal will use
+    det.focal[k]                     # camera k's focal seed (px), for mrcal's --focal
+    det.command                      # the mrcal-calibrate-cameras command ('' when no calibration can run:
+                                     # no board, or a camera of a rig with < 2: det.thin)
+    vnl.write_corners(f, det.boards(), det.weights() if weights else None)   # corners.vnl, as rotstar-detect
+
+A pose that gives no board says why:
+
+    >>> import tempfile
+    >>> import numpy as np
+    >>> from rotstar_mrcal.dataset import write_pattern, write_pose
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> seq = tempfile.mkdtemp(); layout = make_layout(screen=(800, 600), pitch=100, band=24)
+    >>> _ = write_pattern(seq, layout)
+    >>> _ = write_pose(seq, "pose000", {f["file"]: np.zeros((40, 60), np.uint8) for f in layout.frames()})
+    >>> det = detect_dataset(open_dataset(seq))
+    >>> r = det.cameras[0].results[0]
+    >>> r.pose, r.found, r.error[:8], det.kept, det.command
+    ('pose000', False, 'all dark', {0: []}, '')
+
+Every camera is detected alike (one camera is a rig of one, its pose folders
+'poseNNN'; a rig's are 'poseNNN/camera-K'). Poses are detected independently
+(in worker processes with jobs > 1); the display offsets are then estimated
+per camera over its poses that gave a board (display_offsets.dataset_offsets)
+and a pose whose frames moved differently from the others is rejected as a
+camera that moved during the sequence, with how far it moved. With several
+cameras, each pose's boards are checked to be labelled alike in every camera
+(rig.check_labelling); a pose that is not is dropped from every camera. The
+focal seed and the command come from the boards mrcal keeps
+(calibrate.focal.estimate_focal; calibrate.solve.hint_command for one camera,
+calibrate.rig.rig_argv for several: the builders rotstar-calibrate uses).
+corners_file names the corners in the command, weights adds mrcal's
+--corners-cache-has-weights. Nothing here prints: `progress(result)` is
+called as each pose finishes (parallel.process_map: no worker outlives an
+interrupt).
 """
 
 from __future__ import annotations
@@ -26,12 +58,18 @@ import os
 
 import numpy as np
 
-from rotstar_mrcal import dataset
+from rotstar_mrcal.calibrate.focal import estimate_focal
+from rotstar_mrcal.calibrate.rig import rig_argv, rig_globs
+from rotstar_mrcal.calibrate.solve import LEAN_LENSMODEL, command_line, hint_command
+from rotstar_mrcal.dataset import Dataset, DatasetError, Pose, load_pose, pattern_file
 from rotstar_mrcal.parallel import process_map
 from rotstar_mrcal.pattern.layout import Layout
-from rotstar_mrcal.vnl import mrcal_can_read
+from rotstar_mrcal.peers.registry import PoseImages, method
+from rotstar_mrcal.vnl import mrcal_can_read, mrcal_keeps
 from rotstar_mrcal.detect.display_offsets import MAX_MOTION, DisplayCheck, dataset_offsets
 from rotstar_mrcal.detect.pipeline import PoseCorners, detect_pose
+from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner
+from rotstar_mrcal.detect.rig import MAX_TURN_DEG, check_labelling
 
 
 @dataclasses.dataclass
@@ -51,7 +89,7 @@ class PoseResult:
 
 @dataclasses.dataclass
 class DatasetCorners:
-    """Every pose of a dataset, in sorted order, and the display check over them"""
+    """Every pose of one camera of a dataset, in sorted order, and the display check over them"""
 
     seq: str
     layout: Layout
@@ -84,8 +122,8 @@ def detect_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, 
         return PoseResult(pose, fn, None, f"{os.path.join(seq, pose)}: mrcal cannot read file names with "
                                           "whitespace or non-ASCII characters; rename the folder (left out of the output)")
     try:
-        p = dataset.load_pose(seq, pose, pattern_frames)
-    except dataset.DatasetError as e:
+        p = load_pose(seq, pose, pattern_frames)
+    except DatasetError as e:
         return PoseResult(pose, fn, None, str(e))
     opts = dict(opts)
     name = opts.pop("method", "rotstar")
@@ -96,15 +134,13 @@ def detect_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, 
     return PoseResult(pose, p.first_file, r, r.error, (p.rotstar.shape[2], p.rotstar.shape[1]))
 
 
-def started_from_rotstar(name: str, r: PoseCorners, p: dataset.Pose, layout: Layout) -> PoseCorners:
+def started_from_rotstar(name: str, r: PoseCorners, p: Pose, layout: Layout) -> PoseCorners:
     """rotstar's corners r of pose p moved by method `name` (methods.METHODS, start='rotstar'), rotstar's windows
 
     The result keeps rotstar's windows, display offsets and motion (the
     dataset's motion check), and has the method's per-corner reasons; no
     covariance (--weights are rotstar's).
     """
-    from rotstar_mrcal.peers.registry import PoseImages, method
-
     f = method(name)(PoseImages(layout, p.full_scale, frames=p.rotstar, identity=p.identity,
                                 checkerboard=p.checkerboard, phase=p.phase, star=p.star,
                                 start=r.corners, start_window=r.window))
@@ -123,8 +159,6 @@ def missing_frames(layout: Layout, name: str) -> str:
     >>> missing_frames(plain, "phase"), missing_frames(plain, "saddle")
     ('phase-shift frames', '')
     """
-    from rotstar_mrcal.peers.registry import method
-
     needs = method(name).needs
     if needs == "phase" and not layout.phase:
         return "phase-shift frames"
@@ -140,8 +174,6 @@ def method_available(layout: Layout, name: str) -> str:
     >>> method_available(make_layout(screen=(800, 600), pitch=100, band=24), "star")[:48]
     'the sequence has no star frame (it was recorded '
     """
-    from rotstar_mrcal.peers.registry import method
-
     m = method(name)
     what = missing_frames(layout, name)
     if what:
@@ -153,32 +185,17 @@ def method_available(layout: Layout, name: str) -> str:
     return ""
 
 
-def detect_dataset(seq: str, *, window: float = 10.0, refine: str = "symmetric", max_motion: float = MAX_MOTION,
-                   jobs: int = 1, poses: list[str] | None = None, progress=None,
-                   method: str = "rotstar") -> DatasetCorners:
-    """Detect every pose of seq, then check the frames' motion over the dataset; see the module doc
-
-    method: 'rotstar', or a method of the registry that starts from rotstar's
-    corners (methods.METHODS: 'phase', 'star', 'cornersubpix', 'saddle'),
-    run on every pose rotstar found. Raises dataset.DatasetError when the
-    dataset cannot be read at all or its sequence lacks the method's frames.
-    """
-    pattern, layout = dataset.read_pattern(seq)
-    why = method_available(layout, method)
-    if why:
-        raise dataset.DatasetError(f"{dataset.pattern_file(seq)}: {why}")
-    frames = pattern["frames"]
-    poses = dataset.list_poses(seq, frames) if poses is None else poses
+def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refiner = SYMMETRIC,
+                  max_motion: float = MAX_MOTION, jobs: int = 1, progress=None,
+                  method: str = "rotstar") -> DatasetCorners:
+    """Detect camera k's poses of ds, then check their frames' motion over the camera's poses (module doc)"""
+    poses = ds.poses[k]
     opts = dict(window=window, refine=refine, max_motion=max_motion, method=method)
     done: dict[str, PoseResult] = {}
-
-    def finish(r: PoseResult):
+    for r in process_map(detect_one, [(ds.path, p, ds.frames, ds.layout, opts) for p in poses], jobs):
         done[r.pose] = r
         if progress:
             progress(r)
-
-    for r in process_map(detect_one, [(seq, p, frames, layout, opts) for p in poses], jobs):
-        finish(r)
 
     results = [done[p] for p in poses]
     shifts = {r.pose: r.corners.shifts for r in results if r.found and r.corners.shifts is not None}
@@ -191,4 +208,75 @@ def detect_dataset(seq: str, *, window: float = 10.0, refine: str = "symmetric",
         r.error = (f"frames do not align: the camera moved during the sequence (its frames moved "
                    f"{r.corners.motion_px:.2f} px against each other beyond the screen's own offsets, "
                    f"limit {max_motion})")
-    return DatasetCorners(seq, layout, pattern, results, display, rejected)
+    return DatasetCorners(ds.path, ds.layout, ds.pattern, results, display, rejected)
+
+
+@dataclasses.dataclass
+class Detection:
+    """Everything a caller of detect_dataset needs: every camera's corners, the focal seeds, mrcal's command"""
+
+    dataset: Dataset
+    cameras: dict[int, DatasetCorners]
+    disagree: dict[str, str]  # poseNNN -> why its boards were dropped from every camera
+    kept: dict[int, list[PoseResult]]  # per camera, the boards mrcal will use
+    focal: dict[int, float]  # per camera, the focal seed (px); empty when command is ''
+    command: str  # the mrcal-calibrate-cameras command, or '' (no board; or thin)
+    thin: list[int]  # the cameras of a rig with fewer than the 2 boards mrcal needs
+
+    def results(self) -> list[PoseResult]:
+        """Every camera's PoseResults, camera by camera"""
+        return [r for d in self.cameras.values() for r in d.results]
+
+    def found(self, k: int = 0) -> list[PoseResult]:
+        """Camera k's poses that gave a board (after the cross-camera labelling check)"""
+        return [r for r in self.cameras[k].found if self._kept(r)]
+
+    def boards(self) -> list[tuple[str, np.ndarray | None]]:
+        """(file, corners or None) of every camera's poses that mrcal can name, for vnl.write_corners"""
+        return [(r.file, r.corners.corners if self._kept(r) else None)
+                for r in self.results() if mrcal_can_read(r.file)]
+
+    def weights(self) -> list[np.ndarray | None]:
+        return [r.corners.weights() if self._kept(r) else None for r in self.results() if mrcal_can_read(r.file)]
+
+    def _kept(self, r: PoseResult) -> bool:
+        return r.found and r.pose.split("/")[0] not in self.disagree
+
+
+def detect_dataset(ds: Dataset, *, window: float = 10.0, refine: Refiner = SYMMETRIC,
+                   max_motion: float = MAX_MOTION, jobs: int = 1, progress=None, method: str = "rotstar",
+                   corners_file: str = "corners.vnl", weights: bool = False,
+                   max_turn_deg: float = MAX_TURN_DEG) -> Detection:
+    """Detect every camera's poses of ds, check them, and say how to calibrate; see the module doc
+
+    method: 'rotstar', or a method of the registry that starts from rotstar's
+    corners (peers.registry.METHODS: 'phase', 'star', 'cornersubpix', 'saddle'),
+    run on every pose rotstar found. Raises DatasetError when the dataset's
+    sequence lacks the method's frames.
+    """
+    why = method_available(ds.layout, method)
+    if why:
+        raise DatasetError(f"{pattern_file(ds.path)}: {why}")
+    cams = {k: detect_camera(ds, k, window=window, refine=refine, max_motion=max_motion, jobs=jobs,
+                             progress=progress, method=method) for k in ds.cameras}
+    disagree = check_labelling({k: d.found for k, d in cams.items()}, max_turn_deg) if len(cams) > 1 else {}
+    det = Detection(ds, cams, disagree, {}, {}, "", [])
+    det.kept = {k: [r for r in det.found(k) if mrcal_keeps(r.corners.corners, r.corners.weights() if weights else None)]
+                for k in ds.cameras}
+    det.thin = [k for k in ds.cameras if len(det.kept[k]) < 2] if ds.multi_camera else []
+    if any(det.kept.values()) and not det.thin:
+        det.focal, det.command = mrcal_command(ds, det, corners_file, weights)
+    return det
+
+
+def mrcal_command(ds: Dataset, det: Detection, corners_file: str, weights: bool) -> tuple[dict[int, float], str]:
+    """({camera: focal seed}, the mrcal-calibrate-cameras command): rotstar-calibrate's lean model, its builders"""
+    pts = ds.layout.board_points()[..., :2]
+    if not ds.multi_camera:  # the image size the boards were found in (the first, should they differ)
+        imagersize = det.cameras[0].sizes[0]
+        focal = estimate_focal([r.corners.corners for r in det.kept[0]], pts, imagersize)
+        return {0: focal}, hint_command(ds.layout, imagersize, focal, corners_file,
+                                        os.path.join(ds.path, "*", ds.first_frame), weights)
+    focals = {k: estimate_focal([r.corners.corners for r in det.kept[k]], pts, ds.sizes[k]) for k in ds.cameras}
+    return focals, command_line(rig_argv(corners_file, ds.layout, ds.sizes, focals, LEAN_LENSMODEL, ".",
+                                         rig_globs(ds.path, ds.cameras, ds.first_frame), weights))

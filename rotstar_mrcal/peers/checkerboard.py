@@ -443,7 +443,7 @@ def refine_by_window(refine, image, start, window) -> np.ndarray:
     start: (..., 2) points (NaN: none), window: (...) half-window per point
     (px, as detect_pose's PoseCorners.window). Each point is refined with
     win = floor(window), at least 2; a result farther than `window` from
-    its start is dropped, as detect_pose(refine='opencv'|'saddle') does.
+    its start is dropped, as detect_pose(refine=REFINERS['opencv'|'saddle']) does.
     """
     start = np.asarray(start, float)
     window = np.asarray(window, float)

@@ -53,26 +53,18 @@ from typing import Callable
 import numpy as np
 
 from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.detect.pipeline import detect_pose
+from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_symmetric
+from rotstar_mrcal.peers import checkerboard as baselines
+from rotstar_mrcal.peers.checkerboard import (
+    mrgingham_detect, opencv_find_chessboard, opencv_subpix, refine_by_window, saddle_refine,
+)
+from rotstar_mrcal.peers.phase import phase_corners
 
 
 # ---------------------------------------------------------------------------
 # refiners: start corners on frames -> corners
 # ---------------------------------------------------------------------------
-def refine_symmetric(frames, starts, window=10.0) -> np.ndarray:
-    """The paper's Eq. 1 (detect.refine.symmetric_refine) on all frames jointly
-
-    >>> import numpy as np
-    >>> y, x = np.mgrid[0:30, 0:30].astype(float)
-    >>> frames = (128 + 100 * np.tanh(x - 14.3) * np.tanh(y - 15.6))[None]
-    >>> np.round(refine_symmetric(frames, [[15.0, 15.0]], 6), 2)
-    array([[14.3, 15.6]])
-    """
-    from rotstar_mrcal.detect.refine import symmetric_refine
-
-    return symmetric_refine(np.asarray(frames, np.float32), np.asarray(starts, float).reshape(-1, 2),
-                            window=window).corners
-
-
 def _per_frame_mean(fn, frames, starts, window) -> np.ndarray:
     """fn(image, starts, win) on every frame from the same starts; the mean (NaN in any frame -> NaN)"""
     frames = np.asarray(frames, np.float32)
@@ -83,28 +75,16 @@ def _per_frame_mean(fn, frames, starts, window) -> np.ndarray:
 
 def refine_opencv(frames, starts, window=5) -> np.ndarray:
     """cv2.cornerSubPix (detect.baselines.opencv_subpix) on each frame, half window int(window); the mean"""
-    from rotstar_mrcal.peers.checkerboard import opencv_subpix
-
     return _per_frame_mean(opencv_subpix, frames, starts, window)
 
 
 def refine_saddle(frames, starts, window=5) -> np.ndarray:
     """The Lucchese-Mitra saddle fit (detect.baselines.saddle_refine) on each frame; the mean"""
-    from rotstar_mrcal.peers.checkerboard import saddle_refine
-
     return _per_frame_mean(saddle_refine, frames, starts, window)
 
 
-@dataclasses.dataclass(frozen=True)
-class Refiner:
-    name: str
-    needs: str  # 'rotstar': uses the rotating-star frames jointly; 'checkerboard': one image at a time
-    description: str
-    refine: Callable  # (frames (K, H, W), starts (N, 2), window) -> (N, 2), NaN = failed
-
-
 REFINERS = {r.name: r for r in (
-    Refiner("symmetric", "rotstar", "the paper's point-symmetry fit (Eq. 1) on all frames jointly", refine_symmetric),
+    SYMMETRIC,
     Refiner("opencv", "checkerboard", "cv2.cornerSubPix (Forstner); on several frames, the mean of each frame's",
             refine_opencv),
     Refiner("saddle", "checkerboard", "Lucchese-Mitra quadratic saddle fit; on several frames, the mean",
@@ -155,8 +135,6 @@ class Found:
 def rotstar_detection(p: PoseImages):
     """detect_pose on p.frames (default options), computed once per PoseImages"""
     if p.detection is None:
-        from rotstar_mrcal.detect.pipeline import detect_pose
-
         p.detection = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale,
                                   window=p.window, identity=p.identity)
     return p.detection
@@ -174,8 +152,6 @@ def _rotstar_weighted(p: PoseImages) -> Found:
 
 def _finder(how: str, what: str):
     def run(p: PoseImages) -> Found:
-        from rotstar_mrcal.peers.checkerboard import opencv_find_chessboard
-
         if p.checkerboard is None:
             return Found(None, None, "no checkerboard frame")
         c = opencv_find_chessboard(np.asarray(p.checkerboard, np.float32), p.layout.nx, p.layout.ny,
@@ -199,8 +175,6 @@ def _start(p: PoseImages):
 
 def _from_rotstar(fn_name: str):
     def run(p: PoseImages) -> Found:
-        from rotstar_mrcal.peers import checkerboard as baselines
-
         if p.checkerboard is None:
             return Found(None, None, "no checkerboard frame")
         start = _start(p)
@@ -219,8 +193,6 @@ def _phase(p: PoseImages, saturation: str = "reject") -> Found:
     saturation: 'reject' drops a corner whose phase window holds a clipped
     value; 'keep' fits the clipped values as they are (the paper's pipeline).
     """
-    from rotstar_mrcal.peers.phase import phase_corners
-
     if p.phase is None:
         return Found(None, None, "no phase-shift frames")
     if not p.layout.phase:
@@ -236,8 +208,6 @@ def _phase(p: PoseImages, saturation: str = "reject") -> Found:
 
 def _star(p: PoseImages) -> Found:
     """The symmetric refinement (Eq. 1) on the one star frame, from rotstar's corners in rotstar's windows"""
-    from rotstar_mrcal.peers.checkerboard import refine_by_window
-
     if p.star is None:
         return Found(None, None, "no star frame")
     start = _start(p)
@@ -260,8 +230,6 @@ def reason_counts(reason) -> str:
 
 
 def _mrgingham(p: PoseImages, *args) -> Found:
-    from rotstar_mrcal.peers.checkerboard import mrgingham_detect
-
     if p.png is None:
         return Found(None, None, "no square checkerboard image")
     c = mrgingham_detect([p.png], p.layout.nx, jobs=1, extra_args=args)[p.png]

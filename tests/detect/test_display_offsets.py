@@ -58,7 +58,7 @@ def offset_seq(d435_seq, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def offset_run(offset_seq):
-    return detect_dataset(offset_seq[0], jobs=2)
+    return detect_dataset(dataset.open_dataset(offset_seq[0]), jobs=2).cameras[0]
 
 
 def errors(det, truth):
@@ -114,7 +114,7 @@ def test_one_pose_alone_is_not_rejected_for_display_offsets(offset_seq):
 
 
 def test_few_poses_say_offsets_cannot_be_separated(offset_seq):
-    det = detect_dataset(offset_seq[0], poses=["pose000", "pose001"])
+    det = detect_dataset(dataset.open_dataset(offset_seq[0]).only(["pose000", "pose001"])).cameras[0]
     assert det.display.offsets is None and "not separable" in det.display.summary()
     assert len(det.found) == 2
 

@@ -279,10 +279,11 @@ def truth_noise_corners(model, layout: Layout, rts, sigma: float = NOISE_PX, see
 
 def detected_corners(seq: str, jobs: int = 1, progress=None) -> list[np.ndarray | None]:
     """rotstar's corners of every pose of seq (detect.run.detect_dataset), None where it found no board"""
+    from rotstar_mrcal.dataset import open_dataset
     from rotstar_mrcal.detect.run import detect_dataset
 
-    det = detect_dataset(seq, jobs=jobs, progress=progress)
-    return [r.corners.corners if r.found else None for r in det.results]
+    det = detect_dataset(open_dataset(seq), jobs=jobs, progress=progress)
+    return [r.corners.corners if r.found else None for r in det.results()]
 
 
 def write_truth_only(seq: str, layout: Layout, model: mrcal.cameramodel, plan: Plan) -> None:
