@@ -5,7 +5,7 @@ SYNOPSIS
     from rotstar_mrcal.calibrate.cornerset import load_corner_set
     cs = load_corner_set("seq/corners.vnl")
     cs.layout.nx, cs.corners.shape, cs.imagersize    # 14, (N, 9, 14, 2), (1280, 800)
-    cs.seq, cs.truth                                 # 'seq', compare.TrueCamera or None
+    cs.seq, cs.truth                                 # 'seq', a TrueCamera or None
 
 How the pieces are found, in order:
 
@@ -30,13 +30,29 @@ import dataclasses
 import os
 
 import cv2
+import mrcal
 import numpy as np
 
 from rotstar_mrcal import dataset
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.vnl import CornersFileError, mrcal_keeps, open_corners, read_corners
-from rotstar_mrcal.calibrate.solve import vnl_has_weights
-from rotstar_mrcal.evaluate.compare import TestSet, TrueCamera
+
+
+@dataclasses.dataclass
+class TestSet:
+    """The corners of one pose group, to test a model on"""
+
+    corners: np.ndarray  # (N, ny, nx, 2), NaN = missing
+    names: list[str]  # pose name of each board
+    spacing: float  # board corner spacing, metres
+
+
+@dataclasses.dataclass
+class TrueCamera:
+    """The true camera and the true pose of each named pose (simulated data)"""
+
+    model: mrcal.cameramodel
+    rt_cam_board: dict  # pose name -> (6,)
 
 
 class SourceError(ValueError):
@@ -86,6 +102,21 @@ def read_vnl_names(vnl: str) -> list[str]:
     return out
 
 
+def vnl_has_weights(path: str) -> bool:
+    """Does a corners.vnl say (in its `# filename x y ...` header) that column 4 is a weight?"""
+    with open_corners(path) as f:
+        for line in f:
+            s = line.strip()
+            if not s:
+                continue
+            if not s.startswith("#"):
+                return False
+            fields = s.lstrip("#").split()
+            if fields[:3] == ["filename", "x", "y"]:
+                return len(fields) > 3 and fields[3] == "weight"
+    return False
+
+
 def find_dataset(vnl: str, names=None) -> str | None:
     names = read_vnl_names(vnl) if names is None else names
     for n in names[:1]:
@@ -103,8 +134,6 @@ def imager_size(files, vnl: str, seq: str | None) -> tuple[int, int] | None:
             if img is not None:
                 return int(img.shape[1]), int(img.shape[0])
     if seq and os.path.exists(os.path.join(seq, "truth.cameramodel")):
-        import mrcal
-
         W, H = mrcal.cameramodel(os.path.join(seq, "truth.cameramodel")).imagersize()
         return int(W), int(H)
     return None
@@ -150,7 +179,7 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
         raise SourceError(f"{vnl}: cannot read its images for the imager size (give --imagersize W H)")
     t = None
     if truth and seq and os.path.exists(os.path.join(seq, "truth.json")):
-        from rotstar_mrcal.simulate.dataset import load_truth
+        from rotstar_mrcal.simulate.dataset import load_truth  # here: its import costs 0.2 s (python -X importtime)
 
         tr = load_truth(seq)
         t = TrueCamera(tr.model, tr.rt_cam_board)
@@ -159,8 +188,6 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
 
 def load_model(path: str, need_inputs: bool = False):
     """mrcal.cameramodel(path), or a SourceError naming the file and the reason in one line"""
-    import mrcal
-
     if not os.path.exists(path):
         raise SourceError(f"{path}: no such file")
     try:

@@ -47,6 +47,7 @@ import math
 import os
 import shutil
 
+import cv2
 import mrcal
 import numpy as np
 
@@ -54,11 +55,14 @@ from rotstar_mrcal import dataset
 from rotstar_mrcal.atomic import atomic_path
 from rotstar_mrcal.calibrate.focal import focal_estimates
 from rotstar_mrcal.vnl import CornersFileError, mrcal_keeps, open_corners, read_corners
-from rotstar_mrcal.calibrate.solve import (
-    MAX_DROP_SEARCH, MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, VALID_REGION_PARAMETERS,
-    CalibrationError, InputError, command_line, fit_failures, misordered_boards, mrcal_corners,
-    resolve_lensmodel, run_calibration, vnl_has_weights,
+from rotstar_mrcal.calibrate.checks import (
+    MAX_DROP_SEARCH, MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, far_boards, fit_failures, misordered_boards,
 )
+from rotstar_mrcal.calibrate.command import (
+    VALID_REGION_PARAMETERS, InputError, command_line, mrcal_corners, resolve_lensmodel,
+)
+from rotstar_mrcal.calibrate.cornerset import vnl_has_weights
+from rotstar_mrcal.calibrate.solve import CalibrationError, run_calibration
 
 
 def camera_of(path: str) -> int | None:
@@ -379,8 +383,6 @@ def camera_offsets(rs: RigCornerSet, focals: dict) -> dict[str, float]:
     are swapped puts camera K on the other side. Poses seen by camera 0 only
     give 0. The order in which calibrate_rig tries leaving poses out.
     """
-    import cv2
-
     obj = rs.layout.board_points().reshape(-1, 3).astype(np.float64)
     where: dict[str, list] = {}
     for k in rs.cameras:
@@ -423,8 +425,6 @@ def _rig_culprit(rs, stats, focals, estimates, lensmodel, outdir, dropped, impla
     """
     far = [k for k in stats for r in fit_failures(stats[k], estimates[k]) if r.startswith("boards far off")]
     if far and len(far) == len(implausible):
-        from rotstar_mrcal.calibrate.solve import far_boards
-
         names = {n for k in stats for n in far_boards(stats[k]["board_rms_px"])}
         poses = {n.split(":", 1)[1] for n in names}
         if len(poses) == 1:

@@ -9,7 +9,7 @@ import sys
 
 from rotstar_mrcal import dataset
 from rotstar_mrcal.programs import run_tool
-from rotstar_mrcal.calibrate import solve as cal
+from rotstar_mrcal.calibrate import checks, solve as cal
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
 from rotstar_mrcal.cli.common import HelpFormatter, atomic_write, exit_status_help, make_folder, run, say
 
@@ -23,15 +23,15 @@ mrcal says about it to stderr and OUTDIR/calibration.json.
 
 The lens model ('auto', the default) follows mrcal's practice: the lean
 {cal.LEAN_LENSMODEL} first (the model of rotstar-detect's printed command);
-then, when >= {cal.SPLINED_MIN_BOARDS} boards cover >= {100 * cal.SPLINED_MIN_COVERAGE:.0f}% of the imager, mrcal's
+then, when >= {checks.SPLINED_MIN_BOARDS} boards cover >= {100 * checks.SPLINED_MIN_COVERAGE:.0f}% of the imager, mrcal's
 splined model too; the two are compared with mrcal's projection diff against
 their uncertainty, and the splined one is written only if it fits the
 corners clearly better and differs beyond the uncertainty.
 
-Checks: inputs that cannot give a model (fewer than {cal.MIN_BOARDS} boards, images of
+Checks: inputs that cannot give a model (fewer than {checks.MIN_BOARDS} boards, images of
 different sizes, a focal seed the boards disagree on, a splined model the
 boards cannot constrain) are refused before mrcal runs. A model with more
-than {100 * cal.MAX_OUTLIER_FRACTION:.0f}% outliers, an empty valid-intrinsics region, or lean and splined
+than {100 * checks.MAX_OUTLIER_FRACTION:.0f}% outliers, an empty valid-intrinsics region, or lean and splined
 fits that disagree with no way to tell which is right, is not written
 (OUTDIR/camera-0.cameramodel is removed; the fits stay in OUTDIR/candidates/)
 unless --keep. The fit itself is checked: a board whose corners are out of
@@ -49,7 +49,7 @@ camera, the lean model unless --lensmodel), and mrcal's
 OUTDIR/camera-0.cameramodel, camera-1.cameramodel, ... hold each camera's
 intrinsics and extrinsics (camera 0 at the origin); the report gives each
 camera's residuals, outliers and where it is relative to camera 0. A camera
-with more than {100 * cal.MAX_OUTLIER_FRACTION:.0f}% outliers, or a board mrcal mostly rejects (labelled
+with more than {100 * checks.MAX_OUTLIER_FRACTION:.0f}% outliers, or a board mrcal mostly rejects (labelled
 differently than in the other cameras), fails the checks.
 """
 
