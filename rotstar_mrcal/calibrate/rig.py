@@ -122,8 +122,12 @@ class RigCornerSet:
         return float(np.median(est)) if len(est) else self.imagersizes[k][0] / 2
 
 
-def load_rig_corners(vnl: str, seq: str) -> RigCornerSet:
-    """Read a corners.vnl of the multi-camera dataset seq; InputError when it holds no board of some camera"""
+def load_rig_corners(vnl: str, seq: str, imagersize=None) -> RigCornerSet:
+    """Read a corners.vnl of the multi-camera dataset seq; InputError when it holds no board of some camera
+
+    imagersize (W, H), given, is every camera's: an InputError when the
+    images of some camera are of another size.
+    """
     pattern, layout = dataset.read_pattern(seq)
     rig = dataset.read_rig(seq, pattern["frames"])
     try:
@@ -140,8 +144,24 @@ def load_rig_corners(vnl: str, seq: str) -> RigCornerSet:
             files[k].append(fn)
     corners = {k: (np.stack([boards[f] for f in fs]) if fs else np.zeros((0, layout.ny, layout.nx, 2)))
                for k, fs in files.items()}
-    return RigCornerSet(vnl, seq, layout, files, corners, {k: rig.sizes[k] for k in rig.cameras},
-                        vnl_has_weights(vnl))
+    if imagersize:
+        other = {k: v for k, v in rig.sizes.items() if v is not None and tuple(v) != tuple(imagersize)}
+        if other:
+            k, (W, H) = next(iter(other.items()))
+            raise InputError(f"the imager size given, {imagersize[0]}x{imagersize[1]}, is not the size "
+                             f"of {seq}'s camera-{k} images ({W}x{H}): give --imagersize {W} {H} or none")
+    sizes = {k: (tuple(imagersize) if imagersize else rig.sizes[k]) for k in rig.cameras}
+    return RigCornerSet(vnl, seq, layout, files, corners, sizes, vnl_has_weights(vnl))
+
+
+def first_argv(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: float | None = None) -> list[str]:
+    """The first mrcal-calibrate-cameras command calibrate_rig would run (rotstar-calibrate --dry-run)"""
+    check_rig(rs)
+    focals = {k: focal or rs.focal(k) for k in rs.cameras}
+    lm = resolve_lensmodel(spec, rs.imagersizes[0], focals[0])
+    first = os.path.basename(rs.files[0][0])
+    return rig_argv(rs.vnl, rs.layout, rs.imagersizes, focals, lm, os.path.join(outdir, "candidates", "rig"),
+                    rig_globs(rs.seq, rs.cameras, first), rs.weights)
 
 
 def check_rig(rs: RigCornerSet) -> None:
@@ -230,6 +250,11 @@ class RigCalibration:
     def ok(self) -> bool:
         return not self.failures
 
+    @property
+    def paths(self) -> list[str]:
+        """The models written, camera 0 first"""
+        return [self.models[k] for k in sorted(self.models)]
+
     def to_json(self) -> dict:
         return {"format": self.FORMAT, "ok": self.ok, "models": {f"camera-{k}": v for k, v in self.models.items()},
                 "lensmodel": self.lensmodel, "command": self.command, "failures": self.failures, "kept": self.kept,
@@ -293,6 +318,8 @@ def calibrate_rig(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: floa
     even with keep.
     """
     log = log or (lambda s: None)
+    if spec.strip().lower() == "splined":
+        raise InputError("--lensmodel splined is for one camera; give a LENSMODEL_... string for a rig")
     check_rig(rs)
     bad = {f: why for k in rs.cameras for f, why in misordered_boards(rs.corners[k], rs.files[k], rs.layout).items()}
     nboards = sum(len(fs) for fs in rs.files.values())
