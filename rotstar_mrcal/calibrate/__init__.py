@@ -12,8 +12,8 @@ Modules, one concept each:
                 itself, the lean-then-splined choice (calibrate(): a Calibration)
     rig         several cameras calibrated at once, one glob per camera
 
-In import order: command and cornerset import nothing of calibrate/, focal
-imports command, checks command and cornerset, solve those four, rig all.
+In import order: command imports nothing of calibrate/; focal, cornerset
+and checks import command; solve imports those four, rig all of them.
 
 The stage after detect/; evaluate/ measures what it made. See
 doc/validation.md.

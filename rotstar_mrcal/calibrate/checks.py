@@ -37,8 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rotstar_mrcal.calibrate.command import DEFAULT_KNOTS_X, InputError
-from rotstar_mrcal.calibrate.cornerset import resolve_image
+from rotstar_mrcal.calibrate.command import DEFAULT_KNOTS_X, InputError, resolve_image
 
 MIN_BOARDS = 4
 """Fewer boards than this are not calibrated (mrcal would, and badly: one board gives a model 34 px off)"""

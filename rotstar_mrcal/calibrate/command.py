@@ -103,6 +103,13 @@ def resolve_lensmodel(spec: str, imagersize, focal: float, knots_x: int = DEFAUL
     return s
 
 
+def resolve_image(name: str, vnl: str) -> str:
+    """An image name from a vnl as mrcal resolves it (as written, else next to the vnl)"""
+    if os.path.isabs(name) or os.path.exists(name):
+        return name
+    return os.path.join(os.path.dirname(os.path.abspath(vnl)), name)
+
+
 def image_glob(filenames) -> str:
     """A glob matching every file name of one camera: '*' + their common tail
 

@@ -12,7 +12,8 @@ How the pieces are found, in order:
     dataset   the folder two levels above the first image named in the vnl
               (seq/<pose>/<file>), resolved as mrcal resolves it: as written,
               else relative to the vnl's folder; it must hold pattern.json
-    layout    `pattern` if given, else <dataset>/pattern.json, else
+    layout    `layout` if given (read once by the caller), else `pattern`
+              if given, else <dataset>/pattern.json, else
               pattern.json next to the vnl
     imager    `imagersize` if given, else the first image of the vnl that can
               be read, else the dataset's truth.cameramodel (simulated data)
@@ -34,6 +35,7 @@ import mrcal
 import numpy as np
 
 from rotstar_mrcal import dataset
+from rotstar_mrcal.calibrate.command import resolve_image
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.vnl import CornersFileError, mrcal_keeps, open_corners, read_corners
 
@@ -81,13 +83,6 @@ class CornerSet:
 def pose_name(path: str) -> str:
     """seq/<pose>/<file> -> <pose>"""
     return os.path.basename(os.path.dirname(str(path))) or str(path)
-
-
-def resolve_image(name: str, vnl: str) -> str:
-    """An image name from a vnl as mrcal resolves it (as written, else next to the vnl)"""
-    if os.path.isabs(name) or os.path.exists(name):
-        return name
-    return os.path.join(os.path.dirname(os.path.abspath(vnl)), name)
 
 
 def read_vnl_names(vnl: str) -> list[str]:
@@ -139,8 +134,9 @@ def imager_size(files, vnl: str, seq: str | None) -> tuple[int, int] | None:
     return None
 
 
-def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth: bool = True) -> CornerSet:
-    """Read a corners.vnl and find what belongs to it; see the module doc"""
+def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth: bool = True,
+                    layout: Layout | None = None) -> CornerSet:
+    """Read a corners.vnl and find what belongs to it (see the module doc); layout: the pattern's, already read"""
     if not os.path.exists(vnl):
         raise SourceError(f"{vnl}: no such file")
     try:
@@ -150,15 +146,12 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
     if not names:
         raise SourceError(f"{vnl}: no images in it")
     seq = find_dataset(vnl, names)
+    here = os.path.dirname(os.path.abspath(vnl))
+    source = pattern or seq or (here if os.path.exists(os.path.join(here, "pattern.json")) else None)
+    if layout is None and source is None:
+        raise SourceError(f"{vnl}: cannot find the pattern.json of its dataset (give --pattern)")
     try:
-        if pattern:
-            _, layout = dataset.read_pattern(pattern)
-        elif seq:
-            _, layout = dataset.read_pattern(seq)
-        elif os.path.exists(os.path.join(os.path.dirname(os.path.abspath(vnl)), "pattern.json")):
-            _, layout = dataset.read_pattern(os.path.dirname(os.path.abspath(vnl)))
-        else:
-            raise SourceError(f"{vnl}: cannot find the pattern.json of its dataset (give --pattern)")
+        layout = layout or dataset.read_pattern(source)[1]
     except dataset.DatasetError as e:
         raise SourceError(str(e)) from None
     with open_corners(vnl) as f:

@@ -129,7 +129,7 @@ def remove_results(outdir: str) -> None:
             os.remove(fn)
 
 
-def calibrate(a, vnl: str):
+def calibrate(a, vnl: str, layout):
     """The calibration of the corners in vnl, one camera's or a rig's; None after printing a --dry-run's command"""
     log = lambda s: say(s if s.startswith("$ ") else f"rotstar-calibrate: {s}")  # noqa: E731
     if dataset.is_multi_camera(a.seq):
@@ -137,7 +137,7 @@ def calibrate(a, vnl: str):
         if a.dry_run:
             return say("$ " + cal.command_line(rig.first_argv(rs, a.outdir, a.lensmodel, a.focal)))
         return rig.calibrate_rig(rs, a.outdir, a.lensmodel, a.focal, keep=a.keep, log=log)
-    cs = load_corner_set(vnl, pattern=a.seq, imagersize=a.imagersize, truth=False)
+    cs = load_corner_set(vnl, imagersize=a.imagersize, truth=False, layout=layout)
     if a.dry_run:
         return say("$ " + cal.command_line(cal.first_argv(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, a.force)))
     return cal.calibrate(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, keep=a.keep, force=a.force, log=log)
@@ -150,7 +150,7 @@ def main(argv=None) -> int:
 def _main(argv=None) -> int:
     a = parse_args(argv)
     try:
-        dataset.read_pattern(a.seq)
+        _, layout = dataset.read_pattern(a.seq)
     except dataset.DatasetError as e:
         say(f"rotstar-calibrate: {e}")
         return 2
@@ -166,7 +166,7 @@ def _main(argv=None) -> int:
         say("rotstar-calibrate: detection " + (f"{few}; nothing to calibrate" if rc == 1 else "failed"))
         return rc
     try:
-        c = calibrate(a, vnl)
+        c = calibrate(a, vnl, layout)
     except (SourceError, cal.InputError, dataset.DatasetError) as e:
         say(f"rotstar-calibrate: {e}")
         return 2
