@@ -20,7 +20,9 @@ rotstar-calibrate runs (calibrate_argv; calibrate.solve for a corner set)
 come from the same builder. The lens model by name: resolve_lensmodel
 ('auto' and 'lean' are the lean LEAN_LENSMODEL, 'splined' mrcal's
 recommended splined model, recommended_lensmodel; calibrate.solve's module
-doc says when rotstar-calibrate's 'auto' adds the splined one).
+doc says when rotstar-calibrate's 'auto' adds the splined one). A rig's
+command (rig_argv, rig_globs: one glob per camera) is described in
+calibrate.rig's module doc.
 
 The valid-intrinsics region: mrcal-calibrate-cameras computes it from the
 parameters (uncertainty, mean, stdev, count, distance); the region is the
@@ -49,6 +51,7 @@ import math
 import os
 import shlex
 
+from rotstar_mrcal import dataset
 from rotstar_mrcal.atomic import atomic_path
 from rotstar_mrcal.vnl import corners_text
 
@@ -219,3 +222,29 @@ def reseeded_argv(argv, seed_model: str, outdir: str) -> list[str]:
             out.append(argv[i])
             i += 1
     return out
+
+
+def rig_globs(seq: str, cameras, first_frame: str) -> list[str]:
+    """One glob per camera, camera 0 first: seq/*/camera-K/<first frame>
+
+    >>> rig_globs("seq", [0, 1], "rotstar_00.png")
+    ['seq/*/camera-0/rotstar_00.png', 'seq/*/camera-1/rotstar_00.png']
+    """
+    return [os.path.join(seq, "*", dataset.camera_folder(k), first_frame) for k in cameras]
+
+
+def rig_argv(vnl: str, layout, imagersizes: dict, focals: dict, lensmodel: str, outdir: str, globs,
+             weights: bool = False, extra=()) -> list[str]:
+    """The mrcal-calibrate-cameras command of a rig (a list, program first); see calibrate.rig's module doc"""
+    cams = sorted(imagersizes)
+    sizes = {tuple(int(v) for v in imagersizes[k]) for k in cams}
+    argv = ["mrcal-calibrate-cameras"] + (["--corners-cache-has-weights"] if weights else [])
+    argv += ["--corners-cache", vnl, "--lensmodel", lensmodel,
+             "--focal", ",".join(f"{focals[k]:.0f}" for k in cams)]
+    if len(sizes) == 1:
+        W, H = sizes.pop()
+        argv += ["--imagersize", str(W), str(H)]
+    argv += [*layout.mrcal_object_args(),
+             "--valid-intrinsics-region-parameters", *(f"{v:g}" for v in VALID_REGION_PARAMETERS),
+             "--outdir", outdir, *extra, *globs]
+    return argv

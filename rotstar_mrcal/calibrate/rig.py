@@ -59,7 +59,7 @@ from rotstar_mrcal.calibrate.checks import (
     MAX_DROP_SEARCH, MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, far_boards, fit_failures, misordered_boards,
 )
 from rotstar_mrcal.calibrate.command import (
-    VALID_REGION_PARAMETERS, InputError, command_line, mrcal_corners, resolve_lensmodel,
+    InputError, command_line, mrcal_corners, resolve_lensmodel, rig_argv, rig_globs,
 )
 from rotstar_mrcal.calibrate.cornerset import vnl_has_weights
 from rotstar_mrcal.calibrate.solve import CalibrationError, run_calibration
@@ -72,32 +72,6 @@ def camera_of(path: str) -> int | None:
     (1, None)
     """
     return dataset.camera_index(os.path.basename(os.path.dirname(str(path))))
-
-
-def rig_globs(seq: str, cameras, first_frame: str) -> list[str]:
-    """One glob per camera, camera 0 first: seq/*/camera-K/<first frame>
-
-    >>> rig_globs("seq", [0, 1], "rotstar_00.png")
-    ['seq/*/camera-0/rotstar_00.png', 'seq/*/camera-1/rotstar_00.png']
-    """
-    return [os.path.join(seq, "*", dataset.camera_folder(k), first_frame) for k in cameras]
-
-
-def rig_argv(vnl: str, layout, imagersizes: dict, focals: dict, lensmodel: str, outdir: str, globs,
-             weights: bool = False, extra=()) -> list[str]:
-    """The mrcal-calibrate-cameras command of a rig (a list, program first); see the module doc"""
-    cams = sorted(imagersizes)
-    sizes = {tuple(int(v) for v in imagersizes[k]) for k in cams}
-    argv = ["mrcal-calibrate-cameras"] + (["--corners-cache-has-weights"] if weights else [])
-    argv += ["--corners-cache", vnl, "--lensmodel", lensmodel,
-             "--focal", ",".join(f"{focals[k]:.0f}" for k in cams)]
-    if len(sizes) == 1:
-        W, H = sizes.pop()
-        argv += ["--imagersize", str(W), str(H)]
-    argv += [*layout.mrcal_object_args(),
-             "--valid-intrinsics-region-parameters", *(f"{v:g}" for v in VALID_REGION_PARAMETERS),
-             "--outdir", outdir, *extra, *globs]
-    return argv
 
 
 @dataclasses.dataclass
