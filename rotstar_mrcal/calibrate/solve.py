@@ -433,11 +433,7 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
     """
     log = log or (lambda s: None)
     final = os.path.join(outdir, "camera-0.cameramodel")
-    for stale in [final] + [os.path.join(outdir, "candidates", n, "camera-0.cameramodel")
-                                            for n in ("lean", "splined", "model", "lean-seeded", "splined-seeded",
-                                                      "model-seeded")]:
-        if os.path.exists(stale):
-            os.remove(stale)
+    _remove_stale(outdir)
     dropped = {}
     bad = misordered_boards(cs.corners, cs.files, cs.layout)
     if bad and 2 * len(bad) > len(cs.files):
@@ -450,15 +446,7 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
     f = focal_seed(cs, check=not force) if focal is None else float(focal)
     lensmodel = resolve_lensmodel(spec, cs.imagersize, f, knots_x)
     check_inputs(cs, lensmodel, force)
-    plan = [("lean" if spec.strip().lower() in ("auto", "lean") else "model", lensmodel)]
-    why = None
-    if spec.strip().lower() == "auto":
-        ok, why = splined_supported(cs, knots_x)
-        if ok:
-            plan.append(("splined", recommended_lensmodel(cs.imagersize, f, knots_x)))
-            log(f"splined model supported ({why}): fitting it after the lean one")
-        else:
-            log(f"lean model only: {why}")
+    plan, why = _plan(cs, spec, lensmodel, f, knots_x, log)
     vnl = mrcal_corners(cs.vnl, os.path.join(outdir, "candidates"), drop=set(dropped))
     if vnl != cs.vnl and not dropped:
         log(f"{cs.vnl} is not plain ASCII text with LF line ends: mrcal reads the text we read, copied to {vnl}")
@@ -481,6 +469,29 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
         written = final
     return Calibration(written, chosen.name, reason, failures, bool(failures) and bool(written), cands, comparison,
                        f, cs.vnl, {pose_name(k): v for k, v in dropped.items()})
+
+
+def _remove_stale(outdir: str) -> None:
+    """outdir's model and its candidates' models from an earlier run: a failed run leaves none behind"""
+    names = ("lean", "splined", "model", "lean-seeded", "splined-seeded", "model-seeded")
+    for stale in [os.path.join(outdir, "camera-0.cameramodel")] + [
+            os.path.join(outdir, "candidates", n, "camera-0.cameramodel") for n in names]:
+        if os.path.exists(stale):
+            os.remove(stale)
+
+
+def _plan(cs, spec: str, lensmodel: str, f: float, knots_x: int, log) -> tuple[list, str | None]:
+    """The candidates to fit, [(name, lens model)], and why the splined one is (not) among them"""
+    plan = [("lean" if spec.strip().lower() in ("auto", "lean") else "model", lensmodel)]
+    why = None
+    if spec.strip().lower() == "auto":
+        ok, why = splined_supported(cs, knots_x)
+        if ok:
+            plan.append(("splined", recommended_lensmodel(cs.imagersize, f, knots_x)))
+            log(f"splined model supported ({why}): fitting it after the lean one")
+        else:
+            log(f"lean model only: {why}")
+    return plan, why
 
 
 def _atomic_copy(src: str, dst: str) -> None:
