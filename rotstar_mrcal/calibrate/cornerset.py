@@ -5,14 +5,15 @@ SYNOPSIS
     from rotstar_mrcal.calibrate.cornerset import load_corner_set
     cs = load_corner_set("seq/corners.vnl")
     cs.layout.nx, cs.corners.shape, cs.imagersize    # 14, (N, 9, 14, 2), (1280, 800)
-    cs.seq, cs.truth                                 # 'seq', compare.TrueCamera or None
+    cs.seq, cs.truth                                 # 'seq', a TrueCamera or None
 
 How the pieces are found, in order:
 
     dataset   the folder two levels above the first image named in the vnl
               (seq/<pose>/<file>), resolved as mrcal resolves it: as written,
               else relative to the vnl's folder; it must hold pattern.json
-    layout    `pattern` if given, else <dataset>/pattern.json, else
+    layout    `layout` if given (read once by the caller), else `pattern`
+              if given, else <dataset>/pattern.json, else
               pattern.json next to the vnl
     imager    `imagersize` if given, else the first image of the vnl that can
               be read, else the dataset's truth.cameramodel (simulated data)
@@ -30,13 +31,30 @@ import dataclasses
 import os
 
 import cv2
+import mrcal
 import numpy as np
 
 from rotstar_mrcal import dataset
+from rotstar_mrcal.calibrate.command import resolve_image
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.vnl import CornersFileError, mrcal_keeps, open_corners, read_corners
-from rotstar_mrcal.calibrate.solve import vnl_has_weights
-from rotstar_mrcal.evaluate.compare import TestSet, TrueCamera
+
+
+@dataclasses.dataclass
+class TestSet:
+    """The corners of one pose group, to test a model on"""
+
+    corners: np.ndarray  # (N, ny, nx, 2), NaN = missing
+    names: list[str]  # pose name of each board
+    spacing: float  # board corner spacing, metres
+
+
+@dataclasses.dataclass
+class TrueCamera:
+    """The true camera and the true pose of each named pose (simulated data)"""
+
+    model: mrcal.cameramodel
+    rt_cam_board: dict  # pose name -> (6,)
 
 
 class SourceError(ValueError):
@@ -67,13 +85,6 @@ def pose_name(path: str) -> str:
     return os.path.basename(os.path.dirname(str(path))) or str(path)
 
 
-def resolve_image(name: str, vnl: str) -> str:
-    """An image name from a vnl as mrcal resolves it (as written, else next to the vnl)"""
-    if os.path.isabs(name) or os.path.exists(name):
-        return name
-    return os.path.join(os.path.dirname(os.path.abspath(vnl)), name)
-
-
 def read_vnl_names(vnl: str) -> list[str]:
     """Image names of a corners.vnl in order of first appearance"""
     out, seen = [], set()
@@ -84,6 +95,21 @@ def read_vnl_names(vnl: str) -> list[str]:
                 seen.add(s[0])
                 out.append(s[0])
     return out
+
+
+def vnl_has_weights(path: str) -> bool:
+    """Does a corners.vnl say (in its `# filename x y ...` header) that column 4 is a weight?"""
+    with open_corners(path) as f:
+        for line in f:
+            s = line.strip()
+            if not s:
+                continue
+            if not s.startswith("#"):
+                return False
+            fields = s.lstrip("#").split()
+            if fields[:3] == ["filename", "x", "y"]:
+                return len(fields) > 3 and fields[3] == "weight"
+    return False
 
 
 def find_dataset(vnl: str, names=None) -> str | None:
@@ -103,15 +129,14 @@ def imager_size(files, vnl: str, seq: str | None) -> tuple[int, int] | None:
             if img is not None:
                 return int(img.shape[1]), int(img.shape[0])
     if seq and os.path.exists(os.path.join(seq, "truth.cameramodel")):
-        import mrcal
-
         W, H = mrcal.cameramodel(os.path.join(seq, "truth.cameramodel")).imagersize()
         return int(W), int(H)
     return None
 
 
-def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth: bool = True) -> CornerSet:
-    """Read a corners.vnl and find what belongs to it; see the module doc"""
+def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth: bool = True,
+                    layout: Layout | None = None) -> CornerSet:
+    """Read a corners.vnl and find what belongs to it (see the module doc); layout: the pattern's, already read"""
     if not os.path.exists(vnl):
         raise SourceError(f"{vnl}: no such file")
     try:
@@ -121,15 +146,12 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
     if not names:
         raise SourceError(f"{vnl}: no images in it")
     seq = find_dataset(vnl, names)
+    here = os.path.dirname(os.path.abspath(vnl))
+    source = pattern or seq or (here if os.path.exists(os.path.join(here, "pattern.json")) else None)
+    if layout is None and source is None:
+        raise SourceError(f"{vnl}: cannot find the pattern.json of its dataset (give --pattern)")
     try:
-        if pattern:
-            _, layout = dataset.read_pattern(pattern)
-        elif seq:
-            _, layout = dataset.read_pattern(seq)
-        elif os.path.exists(os.path.join(os.path.dirname(os.path.abspath(vnl)), "pattern.json")):
-            _, layout = dataset.read_pattern(os.path.dirname(os.path.abspath(vnl)))
-        else:
-            raise SourceError(f"{vnl}: cannot find the pattern.json of its dataset (give --pattern)")
+        layout = layout or dataset.read_pattern(source)[1]
     except dataset.DatasetError as e:
         raise SourceError(str(e)) from None
     with open_corners(vnl) as f:
@@ -150,7 +172,7 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
         raise SourceError(f"{vnl}: cannot read its images for the imager size (give --imagersize W H)")
     t = None
     if truth and seq and os.path.exists(os.path.join(seq, "truth.json")):
-        from rotstar_mrcal.simulate.dataset import load_truth
+        from rotstar_mrcal.simulate.dataset import load_truth  # here: its import costs 0.2 s (python -X importtime)
 
         tr = load_truth(seq)
         t = TrueCamera(tr.model, tr.rt_cam_board)
@@ -159,8 +181,6 @@ def load_corner_set(vnl: str, pattern: str | None = None, imagersize=None, truth
 
 def load_model(path: str, need_inputs: bool = False):
     """mrcal.cameramodel(path), or a SourceError naming the file and the reason in one line"""
-    import mrcal
-
     if not os.path.exists(path):
         raise SourceError(f"{path}: no such file")
     try:

@@ -19,12 +19,19 @@ board's homography gives two linear equations in it. The median over boards
 is returned, or a 90-degree field of view when no board constrains it.
 focal_estimates returns the per-board values, to judge whether the boards
 agree (one or two boards can be far off: 3275 px for a 640 px camera).
+focal_seed is the seed of a corner set, checked: the boards must agree.
 """
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
+
+from rotstar_mrcal.calibrate.command import InputError
+
+FOCAL_MIN_BOARDS = 3
+FOCAL_MAX_SPREAD = 0.15
+"""The focal seed needs this many boards whose estimates agree to this (median absolute deviation / median)"""
 
 
 def estimate_focal(boards, board_xy: np.ndarray, imagersize) -> float:
@@ -63,3 +70,26 @@ def focal_estimates(boards, board_xy: np.ndarray, imagersize) -> np.ndarray:
         if s > 0:
             est.append(1 / np.sqrt(s))
     return np.array(est, float)
+
+
+def focal_seed(cs, check: bool = True) -> float:
+    """The focal seed (pixels) of a corner set: the median of its boards' estimates
+
+    With check, an InputError unless at least FOCAL_MIN_BOARDS boards give an
+    estimate and they agree to FOCAL_MAX_SPREAD (median absolute deviation
+    over the median): a seed the boards do not support makes mrcal start
+    (and a splined model size its field of view) from a wrong focal length.
+    """
+    est = focal_estimates(list(cs.corners), cs.layout.board_points()[..., :2], cs.imagersize)
+    W = cs.imagersize[0]
+    if not len(est):
+        if check:
+            raise InputError("no board constrains the focal length (give --focal)")
+        return W / 2
+    f = float(np.median(est))
+    spread = float(np.median(np.abs(est - f)) / f)
+    if check and (len(est) < FOCAL_MIN_BOARDS or spread > FOCAL_MAX_SPREAD or not 0.1 * W < f < 20 * W):
+        raise InputError(f"the boards do not support a focal seed ({len(est)} estimates, median {f:.0f} px, "
+                         f"spread {100 * spread:.0f}%; need >= {FOCAL_MIN_BOARDS} agreeing within "
+                         f"{100 * FOCAL_MAX_SPREAD:.0f}%): give --focal, or record more poses")
+    return f

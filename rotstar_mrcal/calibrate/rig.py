@@ -47,6 +47,7 @@ import math
 import os
 import shutil
 
+import cv2
 import mrcal
 import numpy as np
 
@@ -54,11 +55,14 @@ from rotstar_mrcal import dataset
 from rotstar_mrcal.atomic import atomic_path
 from rotstar_mrcal.calibrate.focal import focal_estimates
 from rotstar_mrcal.vnl import CornersFileError, mrcal_keeps, open_corners, read_corners
-from rotstar_mrcal.calibrate.solve import (
-    MAX_DROP_SEARCH, MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, VALID_REGION_PARAMETERS,
-    CalibrationError, InputError, command_line, fit_failures, misordered_boards, mrcal_corners,
-    resolve_lensmodel, run_calibration, vnl_has_weights,
+from rotstar_mrcal.calibrate.checks import (
+    MAX_DROP_SEARCH, MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, far_boards, fit_failures, misordered_boards,
 )
+from rotstar_mrcal.calibrate.command import (
+    InputError, command_line, mrcal_corners, resolve_lensmodel, rig_argv, rig_globs,
+)
+from rotstar_mrcal.calibrate.cornerset import vnl_has_weights
+from rotstar_mrcal.calibrate.solve import CalibrationError, run_calibration
 
 
 def camera_of(path: str) -> int | None:
@@ -68,32 +72,6 @@ def camera_of(path: str) -> int | None:
     (1, None)
     """
     return dataset.camera_index(os.path.basename(os.path.dirname(str(path))))
-
-
-def rig_globs(seq: str, cameras, first_frame: str) -> list[str]:
-    """One glob per camera, camera 0 first: seq/*/camera-K/<first frame>
-
-    >>> rig_globs("seq", [0, 1], "rotstar_00.png")
-    ['seq/*/camera-0/rotstar_00.png', 'seq/*/camera-1/rotstar_00.png']
-    """
-    return [os.path.join(seq, "*", dataset.camera_folder(k), first_frame) for k in cameras]
-
-
-def rig_argv(vnl: str, layout, imagersizes: dict, focals: dict, lensmodel: str, outdir: str, globs,
-             weights: bool = False, extra=()) -> list[str]:
-    """The mrcal-calibrate-cameras command of a rig (a list, program first); see the module doc"""
-    cams = sorted(imagersizes)
-    sizes = {tuple(int(v) for v in imagersizes[k]) for k in cams}
-    argv = ["mrcal-calibrate-cameras"] + (["--corners-cache-has-weights"] if weights else [])
-    argv += ["--corners-cache", vnl, "--lensmodel", lensmodel,
-             "--focal", ",".join(f"{focals[k]:.0f}" for k in cams)]
-    if len(sizes) == 1:
-        W, H = sizes.pop()
-        argv += ["--imagersize", str(W), str(H)]
-    argv += [*layout.mrcal_object_args(),
-             "--valid-intrinsics-region-parameters", *(f"{v:g}" for v in VALID_REGION_PARAMETERS),
-             "--outdir", outdir, *extra, *globs]
-    return argv
 
 
 @dataclasses.dataclass
@@ -118,8 +96,12 @@ class RigCornerSet:
         return float(np.median(est)) if len(est) else self.imagersizes[k][0] / 2
 
 
-def load_rig_corners(vnl: str, seq: str) -> RigCornerSet:
-    """Read a corners.vnl of the multi-camera dataset seq; InputError when it holds no board of some camera"""
+def load_rig_corners(vnl: str, seq: str, imagersize=None) -> RigCornerSet:
+    """Read a corners.vnl of the multi-camera dataset seq; InputError when it holds no board of some camera
+
+    imagersize (W, H), given, is every camera's: an InputError when the
+    images of some camera are of another size.
+    """
     pattern, layout = dataset.read_pattern(seq)
     rig = dataset.read_rig(seq, pattern["frames"])
     try:
@@ -136,8 +118,24 @@ def load_rig_corners(vnl: str, seq: str) -> RigCornerSet:
             files[k].append(fn)
     corners = {k: (np.stack([boards[f] for f in fs]) if fs else np.zeros((0, layout.ny, layout.nx, 2)))
                for k, fs in files.items()}
-    return RigCornerSet(vnl, seq, layout, files, corners, {k: rig.sizes[k] for k in rig.cameras},
-                        vnl_has_weights(vnl))
+    if imagersize:
+        other = {k: v for k, v in rig.sizes.items() if v is not None and tuple(v) != tuple(imagersize)}
+        if other:
+            k, (W, H) = next(iter(other.items()))
+            raise InputError(f"the imager size given, {imagersize[0]}x{imagersize[1]}, is not the size "
+                             f"of {seq}'s camera-{k} images ({W}x{H}): give --imagersize {W} {H} or none")
+    sizes = {k: (tuple(imagersize) if imagersize else rig.sizes[k]) for k in rig.cameras}
+    return RigCornerSet(vnl, seq, layout, files, corners, sizes, vnl_has_weights(vnl))
+
+
+def first_argv(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: float | None = None) -> list[str]:
+    """The first mrcal-calibrate-cameras command calibrate_rig would run (rotstar-calibrate --dry-run)"""
+    check_rig(rs)
+    focals = {k: focal or rs.focal(k) for k in rs.cameras}
+    lm = resolve_lensmodel(spec, rs.imagersizes[0], focals[0])
+    first = os.path.basename(rs.files[0][0])
+    return rig_argv(rs.vnl, rs.layout, rs.imagersizes, focals, lm, os.path.join(outdir, "candidates", "rig"),
+                    rig_globs(rs.seq, rs.cameras, first), rs.weights)
 
 
 def check_rig(rs: RigCornerSet) -> None:
@@ -226,6 +224,11 @@ class RigCalibration:
     def ok(self) -> bool:
         return not self.failures
 
+    @property
+    def paths(self) -> list[str]:
+        """The models written, camera 0 first"""
+        return [self.models[k] for k in sorted(self.models)]
+
     def to_json(self) -> dict:
         return {"format": self.FORMAT, "ok": self.ok, "models": {f"camera-{k}": v for k, v in self.models.items()},
                 "lensmodel": self.lensmodel, "command": self.command, "failures": self.failures, "kept": self.kept,
@@ -289,6 +292,8 @@ def calibrate_rig(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: floa
     even with keep.
     """
     log = log or (lambda s: None)
+    if spec.strip().lower() == "splined":
+        raise InputError("--lensmodel splined is for one camera; give a LENSMODEL_... string for a rig")
     check_rig(rs)
     bad = {f: why for k in rs.cameras for f, why in misordered_boards(rs.corners[k], rs.files[k], rs.layout).items()}
     nboards = sum(len(fs) for fs in rs.files.values())
@@ -379,8 +384,6 @@ def camera_offsets(rs: RigCornerSet, focals: dict) -> dict[str, float]:
     are swapped puts camera K on the other side. Poses seen by camera 0 only
     give 0. The order in which calibrate_rig tries leaving poses out.
     """
-    import cv2
-
     obj = rs.layout.board_points().reshape(-1, 3).astype(np.float64)
     where: dict[str, list] = {}
     for k in rs.cameras:
@@ -423,8 +426,6 @@ def _rig_culprit(rs, stats, focals, estimates, lensmodel, outdir, dropped, impla
     """
     far = [k for k in stats for r in fit_failures(stats[k], estimates[k]) if r.startswith("boards far off")]
     if far and len(far) == len(implausible):
-        from rotstar_mrcal.calibrate.solve import far_boards
-
         names = {n for k in stats for n in far_boards(stats[k]["board_rms_px"])}
         poses = {n.split(":", 1)[1] for n in names}
         if len(poses) == 1:

@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import os
 import sys
 
 from rotstar_mrcal import dataset
-from rotstar_mrcal.programs import run_tool
-from rotstar_mrcal.calibrate import solve as cal
+from rotstar_mrcal.calibrate import checks, rig, solve as cal
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
 from rotstar_mrcal.cli.common import HelpFormatter, atomic_write, exit_status_help, make_folder, run, say
+from rotstar_mrcal.detect.rig import detect_rig
+from rotstar_mrcal.detect.run import detect_dataset
+from rotstar_mrcal.vnl import write_corners
 
 DESCRIPTION = f"""\
 Calibrate a camera from a rotating-star dataset with mrcal: detect the
@@ -23,15 +26,15 @@ mrcal says about it to stderr and OUTDIR/calibration.json.
 
 The lens model ('auto', the default) follows mrcal's practice: the lean
 {cal.LEAN_LENSMODEL} first (the model of rotstar-detect's printed command);
-then, when >= {cal.SPLINED_MIN_BOARDS} boards cover >= {100 * cal.SPLINED_MIN_COVERAGE:.0f}% of the imager, mrcal's
+then, when >= {checks.SPLINED_MIN_BOARDS} boards cover >= {100 * checks.SPLINED_MIN_COVERAGE:.0f}% of the imager, mrcal's
 splined model too; the two are compared with mrcal's projection diff against
 their uncertainty, and the splined one is written only if it fits the
 corners clearly better and differs beyond the uncertainty.
 
-Checks: inputs that cannot give a model (fewer than {cal.MIN_BOARDS} boards, images of
+Checks: inputs that cannot give a model (fewer than {checks.MIN_BOARDS} boards, images of
 different sizes, a focal seed the boards disagree on, a splined model the
 boards cannot constrain) are refused before mrcal runs. A model with more
-than {100 * cal.MAX_OUTLIER_FRACTION:.0f}% outliers, an empty valid-intrinsics region, or lean and splined
+than {100 * checks.MAX_OUTLIER_FRACTION:.0f}% outliers, an empty valid-intrinsics region, or lean and splined
 fits that disagree with no way to tell which is right, is not written
 (OUTDIR/camera-0.cameramodel is removed; the fits stay in OUTDIR/candidates/)
 unless --keep. The fit itself is checked: a board whose corners are out of
@@ -49,7 +52,7 @@ camera, the lean model unless --lensmodel), and mrcal's
 OUTDIR/camera-0.cameramodel, camera-1.cameramodel, ... hold each camera's
 intrinsics and extrinsics (camera 0 at the origin); the report gives each
 camera's residuals, outliers and where it is relative to camera 0. A camera
-with more than {100 * cal.MAX_OUTLIER_FRACTION:.0f}% outliers, or a board mrcal mostly rejects (labelled
+with more than {100 * checks.MAX_OUTLIER_FRACTION:.0f}% outliers, or a board mrcal mostly rejects (labelled
 differently than in the other cameras), fails the checks.
 """
 
@@ -92,16 +95,52 @@ def parse_args(argv=None):
     return p.parse_args(argv)
 
 
-def _detect(a) -> tuple[str | None, int]:
-    """Run rotstar-detect (the program, as printed) into OUTDIR/corners.vnl"""
+def detect_corners(a) -> tuple[str | None, int]:
+    """OUTDIR/corners.vnl, the corners rotstar-detect writes, detected in this process: (vnl, 0);
+    (None, 1) for too few boards (none; fewer than 2 in a camera of a rig), (None, 2) for a dataset that
+    cannot be read. The one place rotstar-calibrate detects, for one camera and for a rig alike.
+    """
     vnl = os.path.join(a.outdir, "corners.vnl")
-    dargs = [a.seq, "-o", vnl, "--jobs", str(a.jobs), "--refine", a.refine] + (["--weights"] if a.weights else [])
-    say("$ " + cal.command_line(["rotstar-detect"] + dargs))
-    exe = os.path.join(os.path.dirname(sys.executable), "rotstar-detect")
-    if not os.path.exists(exe):
-        exe = "rotstar-detect"
-    rc = run_tool([exe, *dargs, "--no-hint"]).returncode
-    return (vnl if rc == 0 else None), rc
+    say("$ " + cal.command_line(["rotstar-detect", a.seq, "-o", vnl, "--jobs", str(a.jobs), "--refine", a.refine]
+                                + ["--weights"] * a.weights) + "    # (run here, in this process)")
+    multi = dataset.is_multi_camera(a.seq)
+    step = (lambda r: say(f"{r.pose}: " + (f"{r.corners.n_valid} corners" if r.found else f"skipped: {r.error}")))
+    try:
+        det = (detect_rig(a.seq, refine=a.refine, jobs=a.jobs, progress=lambda k, r: step(r)) if multi else
+               detect_dataset(a.seq, refine=a.refine, jobs=a.jobs, progress=step))
+    except dataset.DatasetError as e:
+        say(f"rotstar-calibrate: {e}")
+        return None, 2
+    if not det.results:
+        say(f"rotstar-calibrate: {a.seq}: no pose folders with frames from pattern.json")
+        return None, 2
+    with atomic_write(vnl) as f:
+        sparse = {s.file for s in write_corners(f, det.boards(), det.weights() if a.weights else None)}
+    boards = [f for f, grid in det.boards() if grid is not None and f not in sparse]
+    per_camera = [sum(rig.camera_of(f) == k for f in boards) for k in {rig.camera_of(f) for f in boards}]
+    say(f"rotstar-calibrate: {len(boards)} boards detected into {vnl}")
+    return (vnl, 0) if per_camera and min(per_camera) >= (2 if multi else 1) else (None, 1)
+
+
+def remove_results(outdir: str) -> None:
+    """A failed run leaves no old result behind: OUTDIR's camera-K.cameramodel and calibration.json go"""
+    for fn in glob.glob(os.path.join(outdir, "camera-*.cameramodel")) + [os.path.join(outdir, "calibration.json")]:
+        if os.path.exists(fn):
+            os.remove(fn)
+
+
+def calibrate(a, vnl: str, layout):
+    """The calibration of the corners in vnl, one camera's or a rig's; None after printing a --dry-run's command"""
+    log = lambda s: say(s if s.startswith("$ ") else f"rotstar-calibrate: {s}")  # noqa: E731
+    if dataset.is_multi_camera(a.seq):
+        rs = rig.load_rig_corners(vnl, a.seq, a.imagersize)
+        if a.dry_run:
+            return say("$ " + cal.command_line(rig.first_argv(rs, a.outdir, a.lensmodel, a.focal)))
+        return rig.calibrate_rig(rs, a.outdir, a.lensmodel, a.focal, keep=a.keep, log=log)
+    cs = load_corner_set(vnl, imagersize=a.imagersize, truth=False, layout=layout)
+    if a.dry_run:
+        return say("$ " + cal.command_line(cal.first_argv(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, a.force)))
+    return cal.calibrate(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, keep=a.keep, force=a.force, log=log)
 
 
 def main(argv=None) -> int:
@@ -111,7 +150,7 @@ def main(argv=None) -> int:
 def _main(argv=None) -> int:
     a = parse_args(argv)
     try:
-        dataset.read_pattern(a.seq)
+        _, layout = dataset.read_pattern(a.seq)
     except dataset.DatasetError as e:
         say(f"rotstar-calibrate: {e}")
         return 2
@@ -119,38 +158,27 @@ def _main(argv=None) -> int:
         say(f"rotstar-calibrate: {a.corners}: no such file")
         return 2
     make_folder(a.outdir)
-    if dataset.is_multi_camera(a.seq):
-        return _main_rig(a)
-    for stale in ("camera-0.cameramodel", "calibration.json"):  # a failed run leaves no old result behind
-        if os.path.exists(os.path.join(a.outdir, stale)):
-            os.remove(os.path.join(a.outdir, stale))
-    vnl = a.corners
+    remove_results(a.outdir)
+    few, unkept = (("gave too few boards", "no models written; --keep writes them anyway")
+                   if dataset.is_multi_camera(a.seq) else ("found no board", "no model written; --keep writes it anyway"))
+    vnl, rc = (a.corners, 0) if a.corners else detect_corners(a)
     if vnl is None:
-        vnl, rc = _detect(a)
-        if vnl is None:
-            say("rotstar-calibrate: detection " + ("found no board; nothing to calibrate" if rc == 1 else "failed"))
-            return 1 if rc == 1 else 2
+        say("rotstar-calibrate: detection " + (f"{few}; nothing to calibrate" if rc == 1 else "failed"))
+        return rc
     try:
-        cs = load_corner_set(vnl, pattern=a.seq, imagersize=a.imagersize, truth=False)
-        if a.dry_run:
-            cal.check_inputs(cs)
-            f = a.focal or cal.focal_seed(cs, check=not a.force)
-            lm = cal.resolve_lensmodel(a.lensmodel, cs.imagersize, f, a.knots_x)
-            cal.check_inputs(cs, lm, a.force)
-            say("$ " + cal.command_line(cal.calibration_argv(cs, os.path.join(a.outdir, "candidates", "lean"), lm, f)))
-            return 0
-        c = cal.calibrate(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, keep=a.keep, force=a.force,
-                          log=lambda s: say(s if s.startswith("$ ") else f"rotstar-calibrate: {s}"))
-    except (SourceError, cal.InputError) as e:
+        c = calibrate(a, vnl, layout)
+    except (SourceError, cal.InputError, dataset.DatasetError) as e:
         say(f"rotstar-calibrate: {e}")
         return 2
     except cal.CalibrationError as e:
         say(f"rotstar-calibrate: {e}")
         return 1
-    report(c, a.outdir, "no model written; --keep writes it anyway")
-    if c.model_path:
-        print(c.model_path)
-    return 0 if c.model_path else 1
+    if c is None:
+        return 0
+    report(c, a.outdir, unkept)
+    for path in c.paths:
+        print(path)
+    return 0 if c.paths else 1
 
 
 def report(c, outdir: str, unkept: str) -> None:
@@ -163,54 +191,6 @@ def report(c, outdir: str, unkept: str) -> None:
     if c.failures:
         say(f"rotstar-calibrate: {'kept despite: ' if c.kept else 'FAILED: '}" + "; ".join(c.failures)
             + ("" if c.kept else f" ({unkept})"))
-
-
-def _main_rig(a) -> int:
-    """rotstar-calibrate on a multi-camera dataset: one joint solve (validate.rig)"""
-    from rotstar_mrcal.calibrate import rig
-
-    for stale in [f for f in os.listdir(a.outdir) if f.startswith("camera-") and f.endswith(".cameramodel")] + [
-            "calibration.json"]:
-        if os.path.exists(os.path.join(a.outdir, stale)):
-            os.remove(os.path.join(a.outdir, stale))
-    vnl = a.corners
-    if vnl is None:
-        vnl, rc = _detect(a)
-        if vnl is None:
-            say("rotstar-calibrate: detection " + ("gave too few boards; nothing to calibrate" if rc == 1 else "failed"))
-            return 1 if rc == 1 else 2
-    try:
-        rs = rig.load_rig_corners(vnl, a.seq)
-        if a.imagersize:
-            other = {k: v for k, v in rs.imagersizes.items() if v is not None and tuple(v) != tuple(a.imagersize)}
-            if other:
-                k, (W, H) = next(iter(other.items()))
-                raise cal.InputError(f"the imager size given, {a.imagersize[0]}x{a.imagersize[1]}, is not the size "
-                                     f"of {a.seq}'s camera-{k} images ({W}x{H}): give --imagersize {W} {H} or none")
-            rs.imagersizes = {k: tuple(a.imagersize) for k in rs.cameras}
-        if a.dry_run:
-            rig.check_rig(rs)
-            focals = {k: a.focal or rs.focal(k) for k in rs.cameras}
-            lm = cal.resolve_lensmodel(a.lensmodel, rs.imagersizes[0], focals[0])
-            first = os.path.basename(rs.files[0][0])
-            say("$ " + cal.command_line(rig.rig_argv(vnl, rs.layout, rs.imagersizes, focals, lm,
-                                                     os.path.join(a.outdir, "candidates", "rig"),
-                                                     rig.rig_globs(a.seq, rs.cameras, first), rs.weights)))
-            return 0
-        if a.lensmodel.strip().lower() == "splined":
-            raise cal.InputError("--lensmodel splined is for one camera; give a LENSMODEL_... string for a rig")
-        c = rig.calibrate_rig(rs, a.outdir, a.lensmodel, a.focal, keep=a.keep,
-                              log=lambda s: say(s if s.startswith("$ ") else f"rotstar-calibrate: {s}"))
-    except (cal.InputError, dataset.DatasetError) as e:
-        say(f"rotstar-calibrate: {e}")
-        return 2
-    except cal.CalibrationError as e:
-        say(f"rotstar-calibrate: {e}")
-        return 1
-    report(c, a.outdir, "no models written; --keep writes them anyway")
-    for k in sorted(c.models):
-        print(c.models[k])
-    return 0 if c.models else 1
 
 
 if __name__ == "__main__":

@@ -8,15 +8,20 @@ import os
 import sys
 import tempfile
 
+import matplotlib.pyplot as plt
 import numpy as np
 
 from rotstar_mrcal import dataset
-from rotstar_mrcal.calibrate import solve as cal
+from rotstar_mrcal.calibrate import command as cal
 from rotstar_mrcal.report import plots, page as report
 from rotstar_mrcal.peers.cornersets import dataset_methods
 from rotstar_mrcal.evaluate.detection import detect_dataset as _detect_dataset
 from rotstar_mrcal.evaluate.detection import split_interleaved
+from rotstar_mrcal.evaluate.crossval import cross_validate
+from rotstar_mrcal.evaluate.groups import compare_sets, default_label
+from rotstar_mrcal.evaluate.heldout import heldout
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set, load_model
+from rotstar_mrcal.cli.detect import DETECT_METHODS
 from rotstar_mrcal.cli.common import (
     HelpFormatter, Progress, exit_status_help, atomic_write, make_folder, run, say,
 )
@@ -123,8 +128,6 @@ def detect_commands(seq: str, methods, outdir: str, side: str) -> list[str]:
         >>> detect_commands("seq", ["rotstar", "mrgingham"], "xval", "A")
         ['rotstar-detect seq --method rotstar -o xval/rotstar/A.vnl']
     """
-    from rotstar_mrcal.cli.detect import DETECT_METHODS
-
     return [cal.command_line(["rotstar-detect", seq, "--method", m, "-o", os.path.join(outdir, m, f"{side}.vnl")])
             for m in methods if m in DETECT_METHODS]
 
@@ -160,8 +163,6 @@ def mode_heldout(a, model_path: str, test: str) -> int:
 
 
 def _heldout_report(a, model, model_path, test, vnl) -> int:
-    from rotstar_mrcal.evaluate.heldout import heldout
-
     cs = load_corner_set(vnl, a.pattern, a.imagersize, truth=False)
     if tuple(int(v) for v in model.imagersize()) != tuple(cs.imagersize):
         W, H = (int(v) for v in model.imagersize())
@@ -185,10 +186,6 @@ def _heldout_report(a, model, model_path, test, vnl) -> int:
 
 
 def mode_models(a, path_a: str, path_b: str) -> int:
-    import matplotlib.pyplot as plt
-
-    from rotstar_mrcal.evaluate.crossval import cross_validate
-
     ma, mb = load_model(path_a, True), load_model(path_b, True)
     cv = cross_validate(ma, mb, gridn_width=a.gridn, distance=a.distance)
     s = cv.summary()
@@ -211,8 +208,6 @@ def mode_models(a, path_a: str, path_b: str) -> int:
 
 def mode_sets(a, sets: dict) -> int:
     """sets: {name: (vnl A, vnl B)}"""
-    from rotstar_mrcal.evaluate.groups import compare_sets
-
     progress = Progress(3 * len(sets))  # two calibrations and one evaluation per set
     c = compare_sets(sets, a.outdir, a.lensmodel, a.knots_x, a.pattern, a.imagersize, a.gridn, a.distance, a.jobs,
                      a.label, log=lambda s: say(s if s.startswith("[") else f"rotstar-crossval: {s}"),
@@ -230,6 +225,10 @@ def main(argv=None) -> int:
     return run("rotstar-crossval", _main, argv)
 
 
+class UsageError(ValueError):
+    """Inputs that do not make a mode (exit status 2); one line"""
+
+
 def _main(argv=None) -> int:
     a = parse_args(argv)
     try:
@@ -238,58 +237,56 @@ def _main(argv=None) -> int:
             return mode_heldout(a, *a.inputs)
         if len(a.inputs) == 2 and kinds == ["model", "model"]:
             return mode_models(a, *a.inputs)
-        if len(a.inputs) not in (0, 1, 2) or "model" in kinds or (not a.inputs and not a.set):
-            say("rotstar-crossval: give MODEL TEST, MODEL_A MODEL_B, SEQ, A B, or --set NAME A B (see --help)")
-            return 2
-        if not a.outdir:
-            say("rotstar-crossval: comparing two groups needs --outdir for the models and figures")
-            return 2
-        make_folder(a.outdir)
-        sets = {}
-        if len(a.inputs) == 1:
-            if a.methods:
-                say("rotstar-crossval: --methods needs two dataset folders")
-                return 2
-            vnl = (detect_dataset(a.inputs[0], ["rotstar"], a.outdir, "all", a.jobs)["rotstar"]
-                   if kinds[0] == "dataset" else a.inputs[0])
-            va, vb = (os.path.join(a.outdir, "rotstar", f"{s}.vnl") for s in "AB")
-            na, nb = split_interleaved(vnl, va, vb)
-            say(f"rotstar-crossval: split {vnl} into {va} ({na} boards) and {vb} ({nb} boards), interleaved")
-            from rotstar_mrcal.evaluate.groups import default_label
-
-            a.label = a.label or default_label(a.inputs[0], a.inputs[0])  # the recording's name
-            a.inputs = []
-            sets["rotstar"] = (va, vb)
-        if a.inputs:
-            if a.methods:
-                if kinds != ["dataset", "dataset"]:
-                    say("rotstar-crossval: --methods needs two dataset folders")
-                    return 2
-                known = dataset_methods()
-                methods = known if a.methods == "all" else [m.strip() for m in a.methods.split(",")]
-                bad = [m for m in methods if m not in known]
-                if bad:
-                    say(f"rotstar-crossval: unknown methods {bad}; known: {', '.join(known)}")
-                    return 2
-                va = detect_dataset(a.inputs[0], methods, a.outdir, "A", a.jobs)
-                vb = detect_dataset(a.inputs[1], methods, a.outdir, "B", a.jobs)
-                sets.update({m: (va[m], vb[m]) for m in methods})
-            else:
-                pair = []
-                for side, (path, k) in zip("AB", zip(a.inputs, kinds)):
-                    pair.append(detect_dataset(path, ["rotstar"], a.outdir, side, a.jobs)["rotstar"]
-                                if k == "dataset" else path)
-                sets["rotstar"] = tuple(pair)
-        for name, va, vb in a.set:
-            if name in sets:
-                say(f"rotstar-crossval: corner set {name!r} given twice")
-                return 2
-            sets[name] = (va, vb)
-        return mode_sets(a, sets)
-    except (SourceError, dataset.DatasetError) as e:
+        return mode_sets(a, corner_sets(a, kinds))
+    except (SourceError, dataset.DatasetError, UsageError) as e:
         say(f"rotstar-crossval: {e}")
         return 2
 
+
+def corner_sets(a, kinds) -> dict:
+    """{name: (vnl A, vnl B)} of the inputs, datasets detected into a.outdir; UsageError when they make no sets"""
+    if len(a.inputs) not in (0, 1, 2) or "model" in kinds or (not a.inputs and not a.set):
+        raise UsageError("give MODEL TEST, MODEL_A MODEL_B, SEQ, A B, or --set NAME A B (see --help)")
+    if not a.outdir:
+        raise UsageError("comparing two groups needs --outdir for the models and figures")
+    make_folder(a.outdir)
+    if a.methods and a.inputs and (len(a.inputs) == 1 or kinds != ["dataset", "dataset"]):
+        raise UsageError("--methods needs two dataset folders")
+    sets = {}
+    if len(a.inputs) == 1:
+        sets["rotstar"] = split_recording(a, a.inputs[0], kinds[0])
+    elif a.inputs:
+        sets.update(group_sets(a, kinds))
+    for name, va, vb in a.set:
+        if name in sets:
+            raise UsageError(f"corner set {name!r} given twice")
+        sets[name] = (va, vb)
+    return sets
+
+
+def split_recording(a, path: str, kind: str) -> tuple[str, str]:
+    """One recording (a dataset or a corners.vnl) split into two interleaved groups: their vnl files"""
+    vnl = detect_dataset(path, ["rotstar"], a.outdir, "all", a.jobs)["rotstar"] if kind == "dataset" else path
+    va, vb = (os.path.join(a.outdir, "rotstar", f"{s}.vnl") for s in "AB")
+    na, nb = split_interleaved(vnl, va, vb)
+    say(f"rotstar-crossval: split {vnl} into {va} ({na} boards) and {vb} ({nb} boards), interleaved")
+    a.label = a.label or default_label(path, path)  # the recording's name
+    return va, vb
+
+
+def group_sets(a, kinds) -> dict:
+    """The corner sets of two pose groups A and B: rotstar's, or with --methods each method's"""
+    if not a.methods:
+        return {"rotstar": tuple(detect_dataset(path, ["rotstar"], a.outdir, side, a.jobs)["rotstar"]
+                                 if k == "dataset" else path for side, path, k in zip("AB", a.inputs, kinds))}
+    known = dataset_methods()
+    methods = known if a.methods == "all" else [m.strip() for m in a.methods.split(",")]
+    bad = [m for m in methods if m not in known]
+    if bad:
+        raise UsageError(f"unknown methods {bad}; known: {', '.join(known)}")
+    va = detect_dataset(a.inputs[0], methods, a.outdir, "A", a.jobs)
+    vb = detect_dataset(a.inputs[1], methods, a.outdir, "B", a.jobs)
+    return {m: (va[m], vb[m]) for m in methods}
 
 if __name__ == "__main__":
     sys.exit(main())

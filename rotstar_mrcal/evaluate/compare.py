@@ -32,28 +32,12 @@ import dataclasses
 import mrcal
 import numpy as np
 
+from rotstar_mrcal.calibrate.cornerset import TestSet, TrueCamera
 from rotstar_mrcal.calibrate.solve import calibration_stats
 from rotstar_mrcal.evaluate.crossval import CrossVal, cross_validate
 from rotstar_mrcal.evaluate.heldout import HeldOut, heldout
 from rotstar_mrcal.evaluate.tilts import tilts_of
 from rotstar_mrcal.evaluate.truth import TruthError, truth_error, truth_poses_of
-
-
-@dataclasses.dataclass
-class TestSet:
-    """The corners of one pose group, to test a model on"""
-
-    corners: np.ndarray  # (N, ny, nx, 2), NaN = missing
-    names: list[str]  # pose name of each board
-    spacing: float  # board corner spacing, metres
-
-
-@dataclasses.dataclass
-class TrueCamera:
-    """The true camera and the true pose of each named pose (simulated data)"""
-
-    model: mrcal.cameramodel
-    rt_cam_board: dict  # pose name -> (6,)
 
 
 @dataclasses.dataclass

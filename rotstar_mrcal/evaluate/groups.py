@@ -27,6 +27,7 @@ import dataclasses
 import os
 
 from rotstar_mrcal.calibrate import solve as cal
+from rotstar_mrcal.calibrate.checks import SPLINED_MIN_BOARDS
 from rotstar_mrcal.evaluate import compare
 from rotstar_mrcal.report import plots
 from rotstar_mrcal.calibrate.solve import calibration_argv, focal_seed, resolve_lensmodel
@@ -150,8 +151,8 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
         raise SourceError("no corner set could be read")
     first = next(iter(loaded.values()))[0]
     lensmodel = resolve_lensmodel(lensmodel, first.imagersize, focal_seed(first, check=False), knots_x)
-    if "SPLINED" in lensmodel and min(len(c.files) for p in loaded.values() for c in p) < cal.SPLINED_MIN_BOARDS:
-        log(f"warning: fewer than {cal.SPLINED_MIN_BOARDS} boards in a group for a splined model; "
+    if "SPLINED" in lensmodel and min(len(c.files) for p in loaded.values() for c in p) < SPLINED_MIN_BOARDS:
+        log(f"warning: fewer than {SPLINED_MIN_BOARDS} boards in a group for a splined model; "
             "consider the default (lean) model")
 
     cjobs = []
