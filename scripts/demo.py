@@ -25,7 +25,8 @@ printed before it runs:
 The pattern is the paper's whole sequence (rotstar-pattern --paper-sequence),
 so the phase-shift and star methods run beside rotstar and the checkerboard
 ones. The report's path, its headline table and the paper's claims as
-verdicts (rotstar_lab.claims) are printed at the end (stdout); a
+verdicts (rotstar_lab.claims, added to the report's pages by
+add_claims) are printed at the end (stdout); a
 full run (not --quick, seed 1) also writes the table and the verdict lines
 into the marked blocks of README.md, and the table, the error by tilt of the
 test poses and every claim with its numbers into doc/validation.md
@@ -44,6 +45,7 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import re  # noqa: E402
 import shutil  # noqa: E402
 import signal  # noqa: E402
@@ -134,7 +136,23 @@ def crossval_and_report(a, out: str, found: dict, crops: dict) -> tuple[str, str
     if crops:
         cmd += ["--figure", short_path(os.path.join(out, "exposures.png"))
                 + ":Close-ups of one corner near the image corner at the three exposures"]
-    return rep, run(cmd, stdout=subprocess.PIPE, text=True).stdout
+    run(cmd, stdout=subprocess.PIPE, text=True)  # (its headline, without the claims: read below)
+    return rep, add_claims(rep)
+
+
+def add_claims(rep: str) -> str:
+    """The paper's claims (rotstar_lab.claims) into the report folder REP that rotstar-report wrote: its pages,
+    paper.md and headline.md; returns headline.md"""
+    from rotstar_lab import claims
+    from rotstar_mrcal.report.folder import add_sections
+
+    with open(os.path.join(rep, "results.json")) as f:
+        sec = claims.section(json.load(f)["conditions"])
+    if sec is not None:
+        add_sections(rep, [sec])
+        log(f"added the paper's claims to {short_path(rep)} (rotstar_lab.claims)")
+    with open(os.path.join(rep, "headline.md")) as f:
+        return f.read()
 
 
 def write_docs(headline: str, rep: str, seconds: float) -> None:

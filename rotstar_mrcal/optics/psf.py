@@ -305,7 +305,7 @@ class LensPSF:
     and astigmatism point along the field radius (radial_psf). Coma moves
     the light's centroid off the chief ray; unless `tilt` is given, an
     equal and opposite tilt (tilt = -coma) puts it back, so the true camera
-    model is where the light's centroid lands (what rotstar_lab.demo does).
+    model is where the light's centroid lands (what make demo does).
     """
 
     def __init__(self, seidel: Seidel, imagersize, optics: Optics | None = None, tile_px: int = 64,
