@@ -57,6 +57,9 @@ import numpy as np
 from rotstar_mrcal.evaluate.crossval import cross_validate
 from rotstar_mrcal.evaluate.truth import TruthError
 from rotstar_mrcal.evaluate.uncertainty import imager_grid
+from rotstar_mrcal.evaluate import depth as dp
+from rotstar_mrcal.evaluate.truth import truth_error
+from rotstar_mrcal.peers.checkerboard import relabelled_boards
 
 
 def shifted_pair(model, baseline: float, r=(0.0, 0.0, 0.0), model1=None) -> tuple:
@@ -150,8 +153,6 @@ def camera_alignment(model, true_model, rt_ref_board: dict) -> np.ndarray | None
     model: one camera of a joint calibration (with its optimization_inputs);
     rt_ref_board: {pose name: true rt_ref_board} (ref = the true camera 0).
     """
-    from rotstar_mrcal.peers.checkerboard import relabelled_boards
-
     oi = model.optimization_inputs()
     if oi is None:
         return None
@@ -184,8 +185,6 @@ def camera_truth_error(model, true_model, rt_ref_board: dict, gridn_width: int =
     two frames have a known true pose (or the model has no
     optimization_inputs).
     """
-    from rotstar_mrcal.evaluate.truth import truth_error
-
     Rt = camera_alignment(model, true_model, rt_ref_board)
     if Rt is None:
         return truth_error(model, true_model, None, gridn_width=gridn_width)
@@ -271,8 +270,6 @@ def evaluate(method: str, pairs: dict, truth=None, rt_ref_board: dict | None = N
                        "depth": ..., "depth_noisy": ...}},
          "crossval": {"cameras", "extrinsics", "pair_diff", "depth"}}
     """
-    from rotstar_mrcal.evaluate import depth as dp
-
     out = {"method": method, "calibration": {g: pair_stats(p) for g, p in pairs.items()}}
     if truth is not None:
         out["truth"] = {}

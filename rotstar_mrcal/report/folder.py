@@ -33,6 +33,8 @@ from rotstar_mrcal.atomic import atomic_path, atomic_write
 from rotstar_mrcal.report import plots, stereo as stereoreport
 from rotstar_mrcal.evaluate.groups import Comparison
 from rotstar_mrcal.report.page import headline_markdown, html, markdown, methods_of, paper_section, with_sections
+from rotstar_mrcal.report.mrcalshow import calibration_figures
+import matplotlib.pyplot as plt
 
 
 def slug(s: str) -> str:
@@ -85,8 +87,6 @@ def build_report(results, dirs, out: str, title: str, notes: str = "", extra_fig
     sections after the conditions; sections (page.Section) after the
     headline, in paper.md and in short in headline.md.
     """
-    import matplotlib.pyplot as plt
-
     stereo = [r for r in results if r.get("format") == stereoreport.FORMAT]
     dirs = [d for r, d in zip(results, dirs) if r.get("format") != stereoreport.FORMAT]
     results = [r for r in results if r.get("format") != stereoreport.FORMAT]
@@ -193,8 +193,6 @@ def _write(out: str, files: dict) -> None:
 
 def _mrcal_views(r: dict, d: str, out: str, s: str, log=None) -> list:
     """mrcal-show-* figures of the first calibrated method's A model (B for the diff); [(caption, png)]"""
-    from rotstar_mrcal.report.mrcalshow import calibration_figures
-
     m = next((m for m in r["methods"] if (m.get("models") or {}).get("A")), None)
     if m is None:
         return []

@@ -58,6 +58,8 @@ import numpy as np
 
 from rotstar_mrcal.programs import run_tool
 from rotstar_mrcal.report.plots import nice_max
+from rotstar_mrcal.evaluate.uncertainty import projection_uncertainty
+from rotstar_mrcal.calibrate.solve import board_residuals, model_stats, stats_line
 
 TERMINAL = 'pngcairo size 1024,640 noenhanced font ",11" background "white"'
 """An opaque white background: mrcal's default PNG terminal (--hardcopy alone) is transparent"""
@@ -153,9 +155,6 @@ def gnuplot_env(env=None) -> dict:
 
 def scales(model: mrcal.cameramodel, other: mrcal.cameramodel | None = None) -> dict:
     """Colour scales and vector scales for our small errors (module doc)"""
-    from rotstar_mrcal.calibrate.solve import board_residuals
-    from rotstar_mrcal.evaluate.uncertainty import projection_uncertainty
-
     W, H = (int(v) for v in model.imagersize())
     q = np.array([[(W - 1) / 2, (H - 1) / 2], [0, 0], [W - 1, 0], [0, H - 1], [W - 1, H - 1]], float)
     u = projection_uncertainty(model, q)
@@ -263,8 +262,6 @@ def calibration_figures(model_path: str, outdir: str, other: str | None = None, 
     The first caption carries the numbers (calibrate.stats_line): outliers,
     fit RMS, worst residual, uncertainty, valid region.
     """
-    from rotstar_mrcal.calibrate.solve import model_stats, stats_line
-
     stats = model_stats(mrcal.cameramodel(model_path))
     figs = draw(show_commands(model_path, outdir, other=other, image_root=image_root, prefix=prefix))
     out = [(f.caption + (f" ({stats_line(stats)})" if i == 0 else ""), f.png, redraw_command(f))

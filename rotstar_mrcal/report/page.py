@@ -37,6 +37,7 @@ import numpy as np
 
 from rotstar_mrcal.report.stereo import section as stereo_section, section_html as stereo_section_html
 from rotstar_mrcal.report.table import Table, fmt, get
+from rotstar_mrcal.evaluate.tilts import by_tilt
 
 
 def _pair(m, kind):
@@ -100,8 +101,6 @@ def tilt_table(results) -> Table | None:
     |---|---|---|
     | rotstar | **0.1** | **0.3** |
     """
-    from rotstar_mrcal.evaluate.tilts import by_tilt
-
     per = [{m["method"]: by_tilt(m.get("heldout")) for m in r["methods"]} for r in results]
     cols = [(k, t) for k, p in enumerate(per) for t in sorted({t for v in p.values() for t in v})]
     if not cols:
