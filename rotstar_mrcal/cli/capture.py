@@ -12,6 +12,7 @@ import sys
 import threading
 import time
 
+import cv2
 import numpy as np
 
 from rotstar_mrcal import dataset
@@ -292,8 +293,6 @@ def open_rig(a, fps) -> FrameSource:
 
 def snapshot(a, src: FrameSource, names: list[str]) -> int:
     """--snapshot: one frame per camera to DIR, and their levels on stdout"""
-    import cv2
-
     os.makedirs(a.snapshot, exist_ok=True)
     gain, emitter = default_controls(a)
     if emitter != "keep":
