@@ -129,7 +129,7 @@ def frame_names(model, names) -> list:
 
     SYNOPSIS
 
-        >>> _component("seq/pose003/camera-1/rotstar_00.png", {"pose003", "pose004"})
+        >>> pose_of_path("seq/pose003/camera-1/rotstar_00.png", {"pose003", "pose004"})
         'pose003'
     """
     oi = model.optimization_inputs()
@@ -139,11 +139,12 @@ def frame_names(model, names) -> list:
         return out
     names = set(names)
     for iframe, p in zip(oi["indices_frame_camintrinsics_camextrinsics"][:, 0], paths):
-        out[iframe] = out[iframe] or _component(str(p), names)
+        out[iframe] = out[iframe] or pose_of_path(str(p), names)
     return out
 
 
-def _component(path: str, names) -> str | None:
+def pose_of_path(path: str, names) -> str | None:
+    """The component of an image path that is one of names (its pose), None if none is"""
     return next((c for c in reversed(re.split(r"[/\\]", os.path.normpath(path))) if c in names), None)
 
 
