@@ -19,13 +19,11 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from rotstar_lab.docblock import rewrite_block  # noqa: E402
 from rotstar_mrcal.programs import run_tool  # noqa: E402
 from rotstar_lab.modelcheck import run_case, table  # noqa: E402
+from rotstar_lab.uncertaintydoc import uncertainty_doc  # noqa: E402
 
 
 def figures_doc(work, n, seed, docdir, jobs):
     """doc/uncertainty.md's pictures from the n-pose capture: its calibration, its two halves, its splined fit"""
-
-    from rotstar_mrcal.report.mrcalshow import uncertainty_doc
-
     name = f"d435-{n}poses-seed{seed}"
     xval = f"{name}-xval"
     print(f"$ rotstar-crossval {name} --outdir {xval}", file=sys.stderr)

@@ -25,7 +25,8 @@ printed before it runs:
 The pattern is the paper's whole sequence (rotstar-pattern --paper-sequence),
 so the phase-shift and star methods run beside rotstar and the checkerboard
 ones. The report's path, its headline table and the paper's claims as
-verdicts (rotstar_lab.claims) are printed at the end (stdout); a
+verdicts (rotstar_lab.claims, added to the report's pages by
+add_claims) are printed at the end (stdout); a
 full run (not --quick, seed 1) also writes the table and the verdict lines
 into the marked blocks of README.md, and the table, the error by tilt of the
 test poses and every claim with its numbers into doc/validation.md
@@ -44,6 +45,7 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import re  # noqa: E402
 import shutil  # noqa: E402
 import signal  # noqa: E402
@@ -51,7 +53,13 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
+from rotstar_lab import claims  # noqa: E402
+from rotstar_lab.demo import capture, plots, scene, sets  # noqa: E402
+from rotstar_lab.demo.scene import EXPOSURES, exposure_dir  # noqa: E402
+from rotstar_lab.docblock import rewrite_block  # noqa: E402
 from rotstar_lab.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
+from rotstar_mrcal.peers.registry import method_names  # noqa: E402
+from rotstar_mrcal.simulate.poses import centred_pose  # noqa: E402
 
 
 def run(cmd, **kw):
@@ -76,10 +84,6 @@ def parse_args(argv=None):
 
 def corner_sets(a, out: str) -> tuple[dict, dict]:
     """Steps 1-2: the pattern, every pose rendered and detected; ({exposure: {method: {group: vnl}}}, crops)"""
-    from rotstar_lab.demo import capture, plots, scene, sets
-    from rotstar_mrcal.peers.registry import method_names
-    from rotstar_mrcal.simulate.poses import centred_pose
-
     pat = os.path.join(out, "pattern")
     run(["rotstar-pattern", "--paper-sequence", "--out", pat], stdout=subprocess.DEVNULL)
     model, layout, square = scene.camera_and_boards(pat)
@@ -116,8 +120,6 @@ def corner_sets(a, out: str) -> tuple[dict, dict]:
 
 def crossval_and_report(a, out: str, found: dict, crops: dict) -> tuple[str, str]:
     """Steps 3-4: rotstar-crossval per exposure, rotstar-report over them; (report folder, its headline)"""
-    from rotstar_lab.demo import scene
-
     xdirs = []
     for label, _ in scene.EXPOSURES:
         xdir = os.path.join(scene.exposure_dir(out, label), "xval")
@@ -134,7 +136,24 @@ def crossval_and_report(a, out: str, found: dict, crops: dict) -> tuple[str, str
     if crops:
         cmd += ["--figure", short_path(os.path.join(out, "exposures.png"))
                 + ":Close-ups of one corner near the image corner at the three exposures"]
-    return rep, run(cmd, stdout=subprocess.PIPE, text=True).stdout
+    run(cmd, stdout=subprocess.PIPE, text=True)  # (its headline, without the claims: read below)
+    return rep, add_claims(rep)
+
+
+def add_claims(rep: str) -> str:
+    """The paper's claims (rotstar_lab.claims) into the report folder REP that rotstar-report wrote: its pages,
+    paper.md and headline.md; returns headline.md"""
+    # (here, not at the top: report.folder brings matplotlib.pyplot, 1.8-3.5 s measured with python -X importtime,
+    # into every worker process, which imports this script as __mp_main__)
+    from rotstar_mrcal.report.folder import add_sections
+
+    with open(os.path.join(rep, "results.json")) as f:
+        sec = claims.section(json.load(f)["conditions"])
+    if sec is not None:
+        add_sections(rep, [sec])
+        log(f"added the paper's claims to {short_path(rep)} (rotstar_lab.claims)")
+    with open(os.path.join(rep, "headline.md")) as f:
+        return f.read()
 
 
 def write_docs(headline: str, rep: str, seconds: float) -> None:
@@ -142,8 +161,6 @@ def write_docs(headline: str, rep: str, seconds: float) -> None:
     and the paper's claims in short into README.md (demo:claims), whole with the table by tilt (the report's paper.md) into
     doc/validation.md (demo:paper); the report's figure against the truth as doc/img/demo-vs-truth.png; the run's
     wall time (seconds) and cores into README.md (demo:time)"""
-    from rotstar_lab.docblock import rewrite_block
-
     lines = headline.splitlines()
     table = "\n".join(line for line in lines if line.startswith("|"))
     claims = "\n".join([line for line in lines if line.startswith("- ")] + [""]
@@ -164,7 +181,6 @@ def write_docs(headline: str, rep: str, seconds: float) -> None:
 def main(argv=None) -> int:
     a = parse_args(argv)
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))  # workers stopped on the way out
-    from rotstar_lab.demo.scene import EXPOSURES, exposure_dir
 
     t0 = time.monotonic()
     out = os.path.abspath(a.out)

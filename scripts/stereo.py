@@ -56,7 +56,17 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
+import mrcal  # noqa: E402
+import numpy as np  # noqa: E402
+
+from rotstar_lab.docblock import rewrite_block  # noqa: E402
 from rotstar_lab.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
+from rotstar_mrcal.calibrate.rig import camera_of  # noqa: E402
+from rotstar_mrcal.evaluate import depth, stereo  # noqa: E402
+from rotstar_mrcal.evaluate.stereo import pose_of_path  # noqa: E402
+from rotstar_mrcal.report import stereo as stereoreport  # noqa: E402
+from rotstar_mrcal.simulate.rig import load_rig_truth  # noqa: E402
+from rotstar_mrcal.vnl import read_corners  # noqa: E402
 
 
 def run(cmd, **kw):
@@ -133,19 +143,13 @@ def calibrate(a, out: str, ncam: int) -> dict:
 
 def corner_rms(vnls, truth) -> float:
     """RMS (per coordinate, px) of a method's corners against the true projections, over its corners files"""
-    import numpy as np
-
-    from rotstar_mrcal.calibrate.rig import camera_of
-    from rotstar_mrcal.evaluate.stereo import _component
-    from rotstar_mrcal.vnl import read_corners
-
     lay = truth.layout
     d = []
     for vnl in vnls:
         with open(vnl) as f:
             found = read_corners(f, lay.nx, lay.ny)
         for fn, q in found.items():
-            pose, k = _component(fn, set(truth.corners)), camera_of(fn)
+            pose, k = pose_of_path(fn, set(truth.corners)), camera_of(fn)
             if q is not None and pose and k in truth.corners[pose]:
                 d.append((q - truth.corners[pose][k]).reshape(-1, 2))
     d = np.concatenate(d)
@@ -154,11 +158,6 @@ def corner_rms(vnls, truth) -> float:
 
 def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
     """Step 5: the rotstar-stereo/1 results"""
-    import mrcal
-
-    from rotstar_mrcal.simulate.rig import load_rig_truth
-    from rotstar_mrcal.evaluate import depth, stereo
-
     truth = load_rig_truth(seq)
     true = tuple(truth.models[:2])
     lay = truth.layout
@@ -198,9 +197,6 @@ def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
 def write_docs(result: dict, seconds: float) -> None:
     """The tables into doc/validation.md (stereo:tables), the headline into README.md (stereo:headline) and
     the run's wall time (seconds) and cores under it (stereo:time)"""
-    from rotstar_lab.docblock import rewrite_block
-    from rotstar_mrcal.report import stereo as stereoreport
-
     said = "\n".join(f"- {v}" for v in stereoreport.verdicts(result))
     full = said + "\n\n" + "\n".join(f"**{title}**\n\n{t.markdown()}\n\n*{t.caption}*\n"
                                       for title, t in stereoreport.tables(result))
@@ -237,7 +233,6 @@ def main(argv=None) -> int:
     run(["rotstar-report", short_path(sdir), "--out", short_path(rep), "--no-mrcal-figures",
          "--title", "rotstar-mrcal stereo: a simulated D435 pair calibrated twice, against the truth and in depth"],
         stdout=subprocess.DEVNULL)
-    from rotstar_mrcal.report import stereo as stereoreport
 
     print(f"rotstar-mrcal stereo ({time.monotonic() - t0:.0f} s): report {os.path.join(rep, 'index.html')} "
           "(also index.md)")

@@ -40,11 +40,3 @@ Modules, one concept each:
 
 See doc/capture.md.
 """
-
-from rotstar_mrcal.capture.segment import Options, SegmentError, Segmentation, segment, stable_runs, threshold
-from rotstar_mrcal.capture.source import (
-    ArraySource, CaptureError, ControlError, Frame, FrameSource, Recording, record,
-)
-
-__all__ = ["Options", "SegmentError", "Segmentation", "segment", "stable_runs", "threshold",
-           "ArraySource", "CaptureError", "ControlError", "Frame", "FrameSource", "Recording", "record"]

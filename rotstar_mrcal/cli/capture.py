@@ -12,6 +12,7 @@ import sys
 import threading
 import time
 
+import cv2
 import numpy as np
 
 from rotstar_mrcal import dataset
@@ -101,6 +102,22 @@ def _exposures(s: str) -> list[int]:
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-capture", description=DESCRIPTION, epilog=EPILOG,
                                 formatter_class=HelpFormatter)
+    for add in (_what_arguments, _camera_arguments, _several_camera_arguments, _recording_arguments,
+                add_segment_options):
+        add(p)
+    a = p.parse_args(argv)
+    if not a.list and not a.snapshot and (not a.pattern or not a.out):
+        p.error("--pattern and --out are needed (or --list, --snapshot)")
+    if a.backend == "replay" and a.exposure:
+        p.error("a replay has the exposure it was recorded with: drop --exposure")
+    if (a.stereo or a.rgb_device) and a.backend != "v4l2":
+        p.error("--stereo and --rgb-device record over V4L2 (--backend v4l2); split recordings of several cameras "
+                "with rotstar-segment")
+    return a
+
+
+def _what_arguments(p) -> None:
+    """What to do: list the nodes, a snapshot, or record the pattern into --out"""
     p.add_argument("--list", action="store_true",
                    help="list every video node (USB id, formats, sizes, frame rates, controls, D4xx "
                         "extension-unit values) on stdout and exit")
@@ -110,6 +127,10 @@ def parse_args(argv=None):
                         "--stereo: cover one lens to see which camera goes dark)")
     p.add_argument("--pattern", help="the pattern folder (or its pattern.json) that player.html shows")
     p.add_argument("--out", "-o", help="dataset folder (one sub-folder per exposure with --exposure)")
+
+
+def _camera_arguments(p) -> None:
+    """The camera: backend, node, format, controls"""
     g = p.add_argument_group("camera")
     g.add_argument("--backend", choices=BACKENDS, default="v4l2", help="default v4l2")
     g.add_argument("--camera", choices=("d435", "generic"), default="d435",
@@ -128,6 +149,10 @@ def parse_args(argv=None):
     g.add_argument("--settle", type=int, default=8,
                    help="frames dropped after a change of exposure or a pause (default 8)")
     g.add_argument("--force", action="store_true", help="go on when a control cannot be set")
+
+
+def _several_camera_arguments(p) -> None:
+    """A D435's two infrared imagers and its colour camera"""
     s = p.add_argument_group("several cameras (D435: both infrared imagers, the colour camera)")
     s.add_argument("--stereo", action="store_true",
                    help="record the left and the right infrared imager (cameras 0 and 1) from the interleaved "
@@ -144,6 +169,10 @@ def parse_args(argv=None):
     s.add_argument("--rgb-exposure", type=float,
                    help="the colour camera's manual exposure, microseconds (standard UVC controls, 100 us steps); "
                         "default: left alone (its auto exposure will follow the sequence's black marker: set it)")
+
+
+def _recording_arguments(p) -> None:
+    """How long each recording is and when the next pose starts"""
     r = p.add_argument_group("recording")
     r.add_argument("--frames", type=int, help="camera frames per recording (default: --loops loops of the player)")
     r.add_argument("--loops", type=float, default=2.2, help="player loops per recording (default 2.2: at least one "
@@ -155,17 +184,6 @@ def parse_args(argv=None):
                    help="start the next pose when the view has moved and then been still for --still seconds")
     r.add_argument("--still", type=float, default=1.0, help="seconds of stillness that start a pose with --auto (default 1)")
     r.add_argument("--keep-raw", action="store_true", help="keep every recording as OUT/raw/<pose>_<exposure>.npy (+ .json)")
-    add_segment_options(p)
-    a = p.parse_args(argv)
-    if not a.list and not a.snapshot and (not a.pattern or not a.out):
-        p.error("--pattern and --out are needed (or --list, --snapshot)")
-    if a.backend == "replay" and a.exposure:
-        p.error("a replay has the exposure it was recorded with: drop --exposure")
-    if (a.stereo or a.rgb_device) and a.backend != "v4l2":
-        p.error("--stereo and --rgb-device record over V4L2 (--backend v4l2); split recordings of several cameras "
-                "with rotstar-segment")
-    return a
-
 
 # ---- first contact -------------------------------------------------------------------
 def print_nodes(nodes: list[dict]) -> None:
@@ -275,8 +293,6 @@ def open_rig(a, fps) -> FrameSource:
 
 def snapshot(a, src: FrameSource, names: list[str]) -> int:
     """--snapshot: one frame per camera to DIR, and their levels on stdout"""
-    import cv2
-
     os.makedirs(a.snapshot, exist_ok=True)
     gain, emitter = default_controls(a)
     if emitter != "keep":
@@ -328,28 +344,44 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
         print_nodes(describe_nodes())
         return 0
     if a.snapshot:
-        fps = a.fps or DEFAULT_FPS
-        try:
-            src = source or (open_rig(a, fps) if a.stereo or a.rgb_device else
-                             open_source(a.backend, a.device, a.camera, a.fourcc, a.size, fps, a.serial))
-        except CaptureError as e:
-            fail(str(e), EXIT_FAILED)
-        try:
-            return snapshot(a, src, camera_names(src) if isinstance(src, RigSource) else [getattr(src, "path", "")])
-        except CaptureError as e:
-            say(f"rotstar-capture: {e}")
-            return EXIT_FAILED
-        finally:
-            try:
-                src.stop()
-            finally:
-                src.close()
+        return _snapshot(a, source)
     try:
         pattern, layout = dataset.read_pattern(a.pattern)
     except dataset.DatasetError as e:
         fail(str(e))
     check_output_path(a.out, [dataset.pattern_file(a.pattern)], folder=True)
     n_entries = len(player_loop(pattern["frames"]))
+    _warn_formats(a)
+    src = _open(a, source, a.fps if a.fps else (None if a.backend == "replay" else DEFAULT_FPS))
+    return _session(a, argv, src, pattern, layout, n_entries)
+
+
+def _open(a, source: FrameSource | None, fps):
+    """The camera (or the rig) to record from; exits (EXIT_FAILED) when it cannot be opened"""
+    try:
+        return source or (open_rig(a, fps) if a.stereo or a.rgb_device else
+                          open_source(a.backend, a.device, a.camera, a.fourcc, a.size, fps, a.serial))
+    except CaptureError as e:
+        fail(str(e), EXIT_FAILED)
+
+
+def _snapshot(a, source: FrameSource | None) -> int:
+    """--snapshot: open, one frame per camera, close"""
+    src = _open(a, source, a.fps or DEFAULT_FPS)
+    try:
+        return snapshot(a, src, camera_names(src) if isinstance(src, RigSource) else [getattr(src, "path", "")])
+    except CaptureError as e:
+        say(f"rotstar-capture: {e}")
+        return EXIT_FAILED
+    finally:
+        try:
+            src.stop()
+        finally:
+            src.close()
+
+
+def _warn_formats(a) -> None:
+    """Warnings about the camera's settings: a D435 format that loses bits, the colour camera's auto exposure"""
     ir_format = a.stereo_format if a.stereo else a.fourcc
     warn = format_warning(ir_format) if a.camera == "d435" and a.backend != "replay" else None
     if warn:
@@ -357,79 +389,23 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
     if not a.rgb_exposure and a.rgb_device:
         say("rotstar-capture: warning: the colour camera's exposure is left alone (--rgb-exposure sets it): "
             "auto exposure changes the brightness between the player's frames")
-    fps = a.fps if a.fps else (None if a.backend == "replay" else DEFAULT_FPS)
-    try:
-        src = source or (open_rig(a, fps) if a.stereo or a.rgb_device else
-                         open_source(a.backend, a.device, a.camera, a.fourcc, a.size, fps, a.serial))
-    except CaptureError as e:
-        fail(str(e), EXIT_FAILED)
+
+
+def _session(a, argv, src, pattern, layout, n_entries: int) -> int:
+    """Pose after pose into one dataset per exposure, capture.json after each; the summary; the exit status"""
     rig = isinstance(src, RigSource)
     exposures = a.exposure or [None]
     folders = [os.path.join(a.out, f"exp{e}us") if e else a.out for e in exposures]
     datasets = [RigDataset(f, e, src.cameras) if rig else OutputDataset(f, e) for f, e in zip(folders, exposures)]
-    grab = capture_rig_one if rig else capture_one
     if rig:
         say(f"rotstar-capture: {src.cameras} cameras: " + ", ".join(
             f"camera-{k} {v}" for k, v in enumerate(camera_names(src))))
-    opts = SessionOptions(options_from(a), a.keep_raw)
     raw_dir = os.path.join(a.out, "raw")
     interrupted = False
     log = {"format": "rotstar-capture/1", "started": time.strftime("%Y-%m-%d %H:%M:%S"), "argv": sys.argv[1:] if argv is None else list(argv)}
     try:
-        log["source"] = src.info()
-        say(f"rotstar-capture: {src.name}: " + ", ".join(f"{k} {v}" for k, v in log["source"].items()
-                                                        if k in ("device", "card", "format", "fps", "path", "frames")))
-        gain, emitter = default_controls(a)
-        if emitter != "keep" and control(a, f"emitter {emitter}", src.set_emitter, emitter == "on") is not False:
-            say(f"rotstar-capture: emitter {emitter}")
-        if gain is not None:
-            got = control(a, f"gain {gain:g}", src.set_gain, gain)
-            if got is not False:
-                say(f"rotstar-capture: gain {got:g}")
-        nframes = frames_per_recording(a, n_entries, src.fps)
-        say(f"rotstar-capture: {nframes} frames per recording ({a.loops:g} loops of {n_entries} x {a.hold} "
-            f"refreshes at {a.refresh:g} Hz)" if not a.frames else f"rotstar-capture: {nframes} frames per recording")
-        os.makedirs(a.out, exist_ok=True)
-        pose_no = next_free_pose([d.folder for d in datasets])
-        src.start()
-        taken, tau = 0, None
-        interactive = not a.auto
-        while not a.poses or taken < a.poses:
-            pose = f"pose{pose_no:03d}"
-            if interactive:
-                say(f"rotstar-capture: {pose}: " + enter_prompt(a.backend, nframes))
-                line = sys.stdin.readline()
-                if not line or line.strip().lower() == "q":
-                    break
-                skip(src, a.settle)
-            elif tau is not None:  # (the first pose of --auto is recorded at once)
-                say(f"rotstar-capture: {pose}: waiting for the view to move and then be still ...")
-                if not wait_for_new_view(src, tau, src.fps, a.still, need_motion=True):
-                    say("rotstar-capture: the recording ended")
-                    break
-            ok_any = False
-            try:
-                for ds in datasets:
-                    if ds.exposure:
-                        control(a, f"exposure {ds.exposure} us", src.set_exposure_us, ds.exposure)
-                        skip(src, a.settle)
-                    out = grab(src, ds, pose, pattern, layout, nframes, raw_dir, opts)
-                    for m in out.messages:
-                        say(f"rotstar-capture: {m}")
-                    if out.folder:
-                        out_line(out.folder)
-                    ok_any |= out.ok
-            except EOFError:
-                say("rotstar-capture: the recording ended")
-                break
-            finally:
-                log["poses"] = {os.path.basename(os.path.normpath(d.folder)): d.log for d in datasets}
-                with atomic_write(os.path.join(a.out, "capture.json")) as f:
-                    json.dump(log, f, indent=1, default=str)
-            tau = min((d.tau for d in datasets if d.tau is not None), default=tau)
-            if ok_any:
-                taken += 1
-                pose_no += 1
+        nframes = _start(a, src, log, n_entries)
+        _record_poses(a, src, datasets, pattern, layout, nframes, raw_dir, log)
     except CaptureError as e:
         say(f"rotstar-capture: {e}")
         return EXIT_FAILED
@@ -452,6 +428,83 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
     if interrupted:
         return EXIT_INTERRUPTED
     return 0 if any(ds.good for ds in datasets) else EXIT_FAILED
+
+
+def _start(a, src, log: dict, n_entries: int) -> int:
+    """The source described, its emitter and gain set, OUT made; the number of frames per recording"""
+    log["source"] = src.info()
+    say(f"rotstar-capture: {src.name}: " + ", ".join(f"{k} {v}" for k, v in log["source"].items()
+                                                    if k in ("device", "card", "format", "fps", "path", "frames")))
+    gain, emitter = default_controls(a)
+    if emitter != "keep" and control(a, f"emitter {emitter}", src.set_emitter, emitter == "on") is not False:
+        say(f"rotstar-capture: emitter {emitter}")
+    if gain is not None:
+        got = control(a, f"gain {gain:g}", src.set_gain, gain)
+        if got is not False:
+            say(f"rotstar-capture: gain {got:g}")
+    nframes = frames_per_recording(a, n_entries, src.fps)
+    say(f"rotstar-capture: {nframes} frames per recording ({a.loops:g} loops of {n_entries} x {a.hold} "
+        f"refreshes at {a.refresh:g} Hz)" if not a.frames else f"rotstar-capture: {nframes} frames per recording")
+    os.makedirs(a.out, exist_ok=True)
+    return nframes
+
+
+def _record_poses(a, src, datasets, pattern, layout, nframes: int, raw_dir: str, log: dict) -> None:
+    """Until --poses poses with a board (or the user's q, the recording's end): wait for a view, record it"""
+    opts = SessionOptions(options_from(a), a.keep_raw)
+    pose_no = next_free_pose([d.folder for d in datasets])
+    src.start()
+    taken, tau = 0, None
+    while not a.poses or taken < a.poses:
+        pose = f"pose{pose_no:03d}"
+        if not _next_view(a, src, pose, nframes, tau):
+            break
+        try:
+            ok_any = _record_pose(a, src, datasets, pose, pattern, layout, nframes, raw_dir, opts)
+        except EOFError:
+            say("rotstar-capture: the recording ended")
+            break
+        finally:
+            log["poses"] = {os.path.basename(os.path.normpath(d.folder)): d.log for d in datasets}
+            with atomic_write(os.path.join(a.out, "capture.json")) as f:
+                json.dump(log, f, indent=1, default=str)
+        tau = min((d.tau for d in datasets if d.tau is not None), default=tau)
+        if ok_any:
+            taken += 1
+            pose_no += 1
+
+
+def _next_view(a, src, pose: str, nframes: int, tau) -> bool:
+    """Wait for the next view: the user's Enter, or (--auto) the view moving and then still; False: stop"""
+    if not a.auto:
+        say(f"rotstar-capture: {pose}: " + enter_prompt(a.backend, nframes))
+        line = sys.stdin.readline()
+        if not line or line.strip().lower() == "q":
+            return False
+        skip(src, a.settle)
+    elif tau is not None:  # (the first pose of --auto is recorded at once)
+        say(f"rotstar-capture: {pose}: waiting for the view to move and then be still ...")
+        if not wait_for_new_view(src, tau, src.fps, a.still, need_motion=True):
+            say("rotstar-capture: the recording ended")
+            return False
+    return True
+
+
+def _record_pose(a, src, datasets, pose: str, pattern, layout, nframes: int, raw_dir: str, opts) -> bool:
+    """One view at every exposure, each into its dataset; whether any found a board"""
+    grab = capture_rig_one if isinstance(src, RigSource) else capture_one
+    ok_any = False
+    for ds in datasets:
+        if ds.exposure:
+            control(a, f"exposure {ds.exposure} us", src.set_exposure_us, ds.exposure)
+            skip(src, a.settle)
+        out = grab(src, ds, pose, pattern, layout, nframes, raw_dir, opts)
+        for m in out.messages:
+            say(f"rotstar-capture: {m}")
+        if out.folder:
+            out_line(out.folder)
+        ok_any |= out.ok
+    return ok_any
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import sys
@@ -71,6 +72,20 @@ def parse_args(argv=None):
                         "of view (no orientation marker or outer band in sight) still gives correctly labelled "
                         "corners; without them the whole board must be in view. They lengthen the sequence "
                         "(13 more frames for 14x9 corners)")
+    _sequence_arguments(p)
+    a = p.parse_args(argv)
+    if not a.paper_sequence and (a.phase_period is not None or a.star_segments != 16):
+        p.error("--phase-period and --star-segments need --paper-sequence")
+    if a.star_segments % 4:
+        p.error(f"--star-segments {a.star_segments}: must be a multiple of 4")
+    if (a.frames - 1) * abs(a.step) >= math.pi:
+        p.error(f"--frames {a.frames} turned by --step {a.step:g} reach pi, where the frames repeat; "
+                f"use a smaller step (at most pi/{a.frames})")
+    return a
+
+
+def _sequence_arguments(p) -> None:
+    """What else the sequence shows (the paper's phase shifts and star) and how the PNGs are encoded"""
     p.add_argument("--paper-sequence", action="store_true",
                    help="the paper's whole sequence: also the phase-shift frames (4 along x, 4 along y) after the "
                         "identity frames and a star frame after the checkerboard (rotstar-detect --method phase, star)")
@@ -82,15 +97,6 @@ def parse_args(argv=None):
     p.add_argument("--gamma", type=number_arg(float, 0.1, 10), default=2.2,
                    help="display gamma applied to the PNG values so that anti-aliased pixels emit the "
                         "right amount of light (default 2.2; 1 writes linear values)")
-    a = p.parse_args(argv)
-    if not a.paper_sequence and (a.phase_period is not None or a.star_segments != 16):
-        p.error("--phase-period and --star-segments need --paper-sequence")
-    if a.star_segments % 4:
-        p.error(f"--star-segments {a.star_segments}: must be a multiple of 4")
-    if (a.frames - 1) * abs(a.step) >= math.pi:
-        p.error(f"--frames {a.frames} turned by --step {a.step:g} reach pi, where the frames repeat; "
-                f"use a smaller step (at most pi/{a.frames})")
-    return a
 
 
 def main(argv=None) -> int:
@@ -118,8 +124,6 @@ def _main(argv=None) -> int:
         say(f"[{k + 1}/{len(frames)}] {fn}")
     d = layout.to_dict()
     d["display_gamma"] = a.gamma
-    import json
-
     with atomic_write(os.path.join(a.out, "pattern.json")) as fh:
         json.dump(d, fh, indent=2)
         fh.write("\n")

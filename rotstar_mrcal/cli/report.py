@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 
 from rotstar_mrcal.report import folder as reportdir
@@ -31,13 +30,11 @@ colour scales that fit the data, the outlier count and the valid region;
 each with the mrcal-show-* command that redraws it (stderr and the page).
 
 On simulated data (the truth gives each test pose's tilt) it also writes
-OUT/paper.md with the held-out error by tilt of the test poses; when the run
-compares the paper's patterns (rotstar with the star or phase shifting, as
-make demo does), paper.md and the page also state the paper's real-world
-claims (4.2) as verdicts with their numbers (rotstar_lab.claims).
+OUT/paper.md with the held-out error by tilt of the test poses; make demo
+(scripts/demo.py) then adds the paper's real-world claims (4.2) as verdicts
+with their numbers to paper.md, the page and headline.md.
 
-stdout: the headline table and the verdict (Markdown), for pasting, and the
-paper's claims in one line each when they apply;
+stdout: the headline table and the verdict (Markdown), for pasting;
 stderr: the files written and the mrcal-show-* commands.
 """
 

@@ -100,12 +100,18 @@ def seidel_arg(spec: str) -> Seidel:
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
-        prog="rotstar-simulate",
-        description=DESCRIPTION,
-        epilog=EPILOG,
-        formatter_class=HelpFormatter,
-    )
+    p = argparse.ArgumentParser(prog="rotstar-simulate", description=DESCRIPTION, epilog=EPILOG,
+                                formatter_class=HelpFormatter)
+    for add in (_scene_arguments, _sensor_arguments, _pose_arguments, _recording_arguments):
+        add(p)
+    args = p.parse_args(argv)
+    for check in (_check_recording, _check_values, _check_combinations):
+        check(p, args)
+    return args
+
+
+def _scene_arguments(p) -> None:
+    """What is written and seen: the dataset, the pattern, the camera or rig, the poses' number and seed"""
     p.add_argument("--out", metavar="SEQ", help="dataset folder to write (needed unless --recording)")
     p.add_argument(
         "--pattern",
@@ -133,12 +139,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="show the pattern PNGs of --pattern DIR (8-bit, decoded with the display gamma) "
         "instead of the exact linear frames",
     )
-    p.add_argument(
-        "--camera",
-        default="d435",
-        metavar="NAME|FILE",
-        help=f"camera preset ({', '.join(PRESETS)}) or a .cameramodel file",
-    )
+    p.add_argument("--camera", default="d435", metavar="NAME|FILE",
+                   help=f"camera preset ({', '.join(PRESETS)}) or a .cameramodel file")
     p.add_argument("--rig", choices=list(RIGS), default=None,
                    help="simulate a rig of several cameras instead of --camera: "
                         + "; ".join(f"{k}: {v['description']}" for k, v in RIGS.items())
@@ -146,6 +148,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--rgb", action="store_true", help="with --rig: add the colour camera (camera 2, grayscale, 8-bit)")
     p.add_argument("--poses", type=int, default=None, help="number of random poses (default 24; 1 with --recording)")
     p.add_argument("--seed", type=int, default=0, help="seed of the poses and of the noise")
+
+
+def _sensor_arguments(p) -> None:
+    """The lens and the sensor: blur or Seidel PSF, the screen's gamma, noise, gain, bits, sampling"""
     p.add_argument("--blur", type=float, default=None,
                    help="Gaussian PSF sigma in camera pixels (0: none); default 1.0 (without --seidel)")
     p.add_argument("--seidel", type=seidel_arg, default=None, metavar="TERM=WAVES,...",
@@ -184,6 +190,10 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="sub-pixel sampling of the screen: exact box average over the footprint, or its centre only",
     )
     p.add_argument("--room", type=float, default=0.02, help="luminance seen off the screen (white screen = 1)")
+
+
+def _pose_arguments(p) -> None:
+    """Where the board goes, the player's flaws, the work"""
     p.add_argument(
         "--distance",
         type=float,
@@ -200,6 +210,10 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "frame, or 'random:A' for offsets uniform in a disc of radius A (seeded by --seed)")
     p.add_argument("--jobs", type=int, default=1, help="render poses in this many processes (results do not depend on it)")
     p.add_argument("--force", action="store_true", help="write into a folder that already holds a dataset")
+
+
+def _recording_arguments(p) -> None:
+    """--recording: the looping player filmed instead of a dataset"""
     r = p.add_argument_group("a recording of the looping player (instead of a dataset)")
     r.add_argument("--recording", metavar="REC.npy",
                    help="write what a camera records while player.html loops, pose after pose (still for --loops "
@@ -212,7 +226,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     r.add_argument("--loops", type=number_arg(float, 0, lo_open=True), default=2.2,
                    help="loops of the player per pose that rotstar-capture records (its --loops); each pose is "
                         "still for 1 s + this + 1 loops")
-    args = p.parse_args(argv)
+
+
+def _check_recording(p, args) -> None:
+    """--out or --recording, and what --recording does not take"""
     if (args.out is None) == (args.recording is None):
         p.error("give --out SEQ (a dataset) or --recording REC.npy (a recording of the player), not both" if
                 args.out else "--out SEQ is needed (or --recording REC.npy)")
@@ -224,6 +241,10 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--recording needs --pattern DIR: the pattern folder player.html shows (rotstar-pattern --out DIR)")
     if args.recording and not args.recording.endswith(".npy"):
         p.error(f"--recording {args.recording}: the file name must end in .npy")
+
+
+def _check_values(p, args) -> None:
+    """Counts and bit depths in range; the defaults that depend on other arguments"""
     if args.poses is None:
         args.poses = 1 if args.recording else 24
     if args.poses < 1:
@@ -234,6 +255,10 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--jobs must be at least 1")
     if args.value_bits is not None and not 1 <= args.value_bits <= args.bits:
         p.error(f"--value-bits must be between 1 and --bits ({args.bits})")
+
+
+def _check_combinations(p, args) -> None:
+    """Arguments that exclude or need each other; finite, non-negative numbers"""
     if args.paper_sequence and args.pattern:
         p.error("--paper-sequence is for the default screen; with --pattern the sequence is the pattern.json's")
     if args.screen_png and not args.pattern:
@@ -253,8 +278,6 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--blur, --noise, --shot, --gain, --black, --room, --max-tilt, --distance and --margin must be finite")
     if args.blur < 0 or args.noise < 0 or args.shot < 0:
         p.error("--blur, --noise and --shot must not be negative")
-    return args
-
 
 def display_offsets(spec: str | None, n: int, seed: int) -> np.ndarray | None:
     """--display-offsets: (n, 2) display pixels, or None
@@ -372,14 +395,7 @@ def _main(argv=None) -> int:
         print(f"rotstar-simulate: {msg}", file=sys.stderr, flush=True)
 
     try:
-        encoded = DISPLAY_GAMMA
-        if args.pattern:
-            d, layout = read_pattern(args.pattern)
-            encoded = display_gamma(d, args.pattern)
-            if not args.identity:
-                layout = dataclasses.replace(layout, identity=False)
-        else:
-            layout = make_layout(identity=args.identity, **(PAPER_SEQUENCE if args.paper_sequence else {}))
+        layout, encoded = _layout(args)
         if args.rig:
             cams = rig_cameras(args.rig, args.seed, args.rgb, args.blur)
             model, camera = cams[0].model, f"{args.rig} rig camera 0"
@@ -388,12 +404,7 @@ def _main(argv=None) -> int:
         if args.recording:
             check_output_path(args.recording)
             return _recording(args, layout, model, camera, encoded, say)
-        check_output_path(args.out, folder=True)
-        if args.pattern and os.path.realpath(args.out) == os.path.realpath(
-                args.pattern if os.path.isdir(args.pattern) else os.path.dirname(args.pattern) or "."):
-            fail(f"{args.out}: is the --pattern folder; write the dataset elsewhere")
-        if not args.force and os.path.exists(os.path.join(args.out, "truth.json")):
-            fail(f"{args.out} already holds a simulated dataset (use --force to overwrite)")
+        _check_out(args)
     except (DatasetError, ValueError) as e:
         fail(str(e))
     try:
@@ -407,52 +418,45 @@ def _main(argv=None) -> int:
         )
         if args.rig:
             return _rig(args, layout, frames, cams, distance, say, gammas)
-        rts = random_poses(
-            model,
-            layout,
-            args.poses,
-            np.random.default_rng([0, args.seed]),
-            distance=distance,
-            max_tilt_deg=args.max_tilt,
-            margin_px=args.margin,
-        )
-        settings = Settings(
-            supersample=args.supersample,
-            blur_px=args.blur,
-            sampling=args.sampling,
-            room=args.room,
-            gain=args.gain,
-            black=args.black,
-            noise=args.noise,
-            shot=args.shot,
-            bits=args.bits,
-            value_bits=args.value_bits,
-            seed=args.seed,
-        )
-        write_dataset(
-            args.out,
-            layout,
-            model,
-            rts,
-            settings,
-            frames=frames,
-            psf=None if args.seidel is None else LensPSF(args.seidel, model.imagersize()),
-            jobs=args.jobs,
-            display_offsets=display_offsets(args.display_offsets, layout.nframes, args.seed),
-            progress=say,
-            extra={
-                "camera": camera,
-                "screen": "png" if args.screen_png else "exact",
-                **gammas,
-                "distance_m": list(distance),
-                "max_tilt_deg": args.max_tilt,
-                "margin_px": args.margin if args.margin is not None else 0.02 * float(model.imagersize()[0]),
-            },
-        )
+        _one_camera(args, layout, frames, model, camera, distance, say, gammas)
     except (DatasetError, ValueError, RuntimeError, OSError) as e:
         fail(f"error: {e}", EXIT_FAILED)
     out_line(args.out)
     return 0
+
+
+def _layout(args):
+    """(layout, the display gamma its PNGs are encoded for): --pattern's, or make_layout's"""
+    if not args.pattern:
+        return make_layout(identity=args.identity, **(PAPER_SEQUENCE if args.paper_sequence else {})), DISPLAY_GAMMA
+    d, layout = read_pattern(args.pattern)
+    encoded = display_gamma(d, args.pattern)
+    if not args.identity:
+        layout = dataclasses.replace(layout, identity=False)
+    return layout, encoded
+
+
+def _check_out(args) -> None:
+    """--out: a folder to write, not the --pattern folder, not a dataset already (unless --force)"""
+    check_output_path(args.out, folder=True)
+    if args.pattern and os.path.realpath(args.out) == os.path.realpath(
+            args.pattern if os.path.isdir(args.pattern) else os.path.dirname(args.pattern) or "."):
+        fail(f"{args.out}: is the --pattern folder; write the dataset elsewhere")
+    if not args.force and os.path.exists(os.path.join(args.out, "truth.json")):
+        fail(f"{args.out} already holds a simulated dataset (use --force to overwrite)")
+
+
+def _one_camera(args, layout, frames, model, camera: str, distance, say, gammas: dict) -> None:
+    """One camera: --poses random poses rendered into the dataset --out"""
+    rts = random_poses(model, layout, args.poses, np.random.default_rng([0, args.seed]), distance=distance,
+                       max_tilt_deg=args.max_tilt, margin_px=args.margin)
+    write_dataset(
+        args.out, layout, model, rts, settings_of(args), frames=frames,
+        psf=None if args.seidel is None else LensPSF(args.seidel, model.imagersize()), jobs=args.jobs,
+        display_offsets=display_offsets(args.display_offsets, layout.nframes, args.seed), progress=say,
+        extra={"camera": camera, "screen": "png" if args.screen_png else "exact", **gammas,
+               "distance_m": list(distance), "max_tilt_deg": args.max_tilt,
+               "margin_px": args.margin if args.margin is not None else 0.02 * float(model.imagersize()[0])})
 
 
 if __name__ == "__main__":

@@ -47,14 +47,15 @@ import math
 
 import mrcal
 import numpy as np
+from rotstar_mrcal.simulate.camera import fov_deg
+from rotstar_mrcal.evaluate.crossval import verdict
+from rotstar_mrcal.evaluate.uncertainty import imager_grid
 
 DISTANCES = (0.5, 1.0, 2.0)
 """Depths (m) of the held-out boards"""
 
 
 def _fov(model) -> tuple[float, float]:
-    from rotstar_mrcal.simulate.camera import fov_deg
-
     h, v, _ = fov_deg(model)
     return float(h), float(v)
 
@@ -261,8 +262,6 @@ def grid_points(models, depth: float, gridn_width: int = 8, margin: float = 10.0
         >>> p.shape, bool(np.allclose(p[:, 2], 1.0))
         ((40, 3), True)
     """
-    from rotstar_mrcal.evaluate.uncertainty import imager_grid
-
     W, H = models[0].imagersize()
     c = np.array(((W - 1) / 2, (H - 1) / 2))
     q = c + (imager_grid((W, H), gridn_width) - c) * 0.9
@@ -283,8 +282,6 @@ def depth_crossval(pair_a, pair_b, distances=DISTANCES, gridn_width: int = 8) ->
     1 or below (crossval.verdict's words); far above: model errors.
     {depth: {"diff_median_mm", "diff_p95_mm", "unc_median_mm", "ratio_median", "verdict", "points"}}
     """
-    from rotstar_mrcal.evaluate.crossval import verdict
-
     out = {}
     for z in distances:
         p = grid_points(pair_a, z, gridn_width)

@@ -26,6 +26,9 @@ import concurrent.futures as cf
 import dataclasses
 import os
 
+import matplotlib.pyplot as plt
+import mrcal
+
 from rotstar_mrcal.calibrate import solve as cal
 from rotstar_mrcal.calibrate.checks import SPLINED_MIN_BOARDS
 from rotstar_mrcal.evaluate import compare
@@ -33,6 +36,8 @@ from rotstar_mrcal.report import plots
 from rotstar_mrcal.calibrate.solve import calibration_argv, focal_seed, resolve_lensmodel
 from rotstar_mrcal.peers.registry import description
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
+from rotstar_mrcal.report.page import detail
+from rotstar_mrcal.simulate.dataset import load_truth
 
 FORMAT = "rotstar-crossval/1"
 
@@ -70,8 +75,6 @@ class Comparison:
                    sum(1 for m in d.get("methods", []) if m.get("error")), len(d.get("methods", [])))
 
     def markdown(self) -> str:
-        from rotstar_mrcal.report.page import detail
-
         return detail(self.to_json()).markdown()
 
 
@@ -107,10 +110,6 @@ def _calibrate(job):
 
 def _evaluate(method, path_a, path_b, test_a, test_b, seq_a, seq_b, gridn, distance):
     """Worker: one method's evaluation from its two model files"""
-    import mrcal
-
-    from rotstar_mrcal.simulate.dataset import load_truth
-
     def truth(seq):
         if seq and os.path.exists(os.path.join(seq, "truth.json")):
             t = load_truth(seq)
@@ -130,8 +129,6 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
     per calibration and evaluation. Raises SourceError when no set can be
     read.
     """
-    import matplotlib.pyplot as plt
-
     log = log or (lambda s: None)
     step = progress or (lambda lbl, msg: None)
     os.makedirs(outdir, exist_ok=True)

@@ -57,6 +57,9 @@ import numpy as np
 from rotstar_mrcal.evaluate.crossval import cross_validate
 from rotstar_mrcal.evaluate.truth import TruthError
 from rotstar_mrcal.evaluate.uncertainty import imager_grid
+from rotstar_mrcal.evaluate import depth as dp
+from rotstar_mrcal.evaluate.truth import truth_error
+from rotstar_mrcal.peers.checkerboard import relabelled_boards
 
 
 def shifted_pair(model, baseline: float, r=(0.0, 0.0, 0.0), model1=None) -> tuple:
@@ -126,7 +129,7 @@ def frame_names(model, names) -> list:
 
     SYNOPSIS
 
-        >>> _component("seq/pose003/camera-1/rotstar_00.png", {"pose003", "pose004"})
+        >>> pose_of_path("seq/pose003/camera-1/rotstar_00.png", {"pose003", "pose004"})
         'pose003'
     """
     oi = model.optimization_inputs()
@@ -136,11 +139,12 @@ def frame_names(model, names) -> list:
         return out
     names = set(names)
     for iframe, p in zip(oi["indices_frame_camintrinsics_camextrinsics"][:, 0], paths):
-        out[iframe] = out[iframe] or _component(str(p), names)
+        out[iframe] = out[iframe] or pose_of_path(str(p), names)
     return out
 
 
-def _component(path: str, names) -> str | None:
+def pose_of_path(path: str, names) -> str | None:
+    """The component of an image path that is one of names (its pose), None if none is"""
     return next((c for c in reversed(re.split(r"[/\\]", os.path.normpath(path))) if c in names), None)
 
 
@@ -150,8 +154,6 @@ def camera_alignment(model, true_model, rt_ref_board: dict) -> np.ndarray | None
     model: one camera of a joint calibration (with its optimization_inputs);
     rt_ref_board: {pose name: true rt_ref_board} (ref = the true camera 0).
     """
-    from rotstar_mrcal.peers.checkerboard import relabelled_boards
-
     oi = model.optimization_inputs()
     if oi is None:
         return None
@@ -184,8 +186,6 @@ def camera_truth_error(model, true_model, rt_ref_board: dict, gridn_width: int =
     two frames have a known true pose (or the model has no
     optimization_inputs).
     """
-    from rotstar_mrcal.evaluate.truth import truth_error
-
     Rt = camera_alignment(model, true_model, rt_ref_board)
     if Rt is None:
         return truth_error(model, true_model, None, gridn_width=gridn_width)
@@ -271,8 +271,6 @@ def evaluate(method: str, pairs: dict, truth=None, rt_ref_board: dict | None = N
                        "depth": ..., "depth_noisy": ...}},
          "crossval": {"cameras", "extrinsics", "pair_diff", "depth"}}
     """
-    from rotstar_mrcal.evaluate import depth as dp
-
     out = {"method": method, "calibration": {g: pair_stats(p) for g, p in pairs.items()}}
     if truth is not None:
         out["truth"] = {}

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 
+import mrcal
 import numpy as np
 
 STEP = 10  # tilt bins, degrees
@@ -32,8 +33,6 @@ STEP = 10  # tilt bins, degrees
 
 def tilt_deg(rt_cam_board, centre_board) -> np.ndarray:
     """(...,) the angle between the board normal and the line of sight to board point centre_board, degrees"""
-    import mrcal
-
     rt = np.asarray(rt_cam_board, float)
     normal = mrcal.rotate_point_r(rt[..., :3], np.array((0.0, 0.0, 1.0)))
     c = mrcal.transform_point_rt(rt, np.asarray(centre_board, float))

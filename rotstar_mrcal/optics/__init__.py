@@ -18,16 +18,12 @@ Modules, one concept each:
 See doc/optics.md.
 """
 
-from rotstar_mrcal.optics.crlb import closed_form_corner_bound, crlb_cov, crlb_rms, fisher_information
-from rotstar_mrcal.optics.psf import (
-    LensPSF, Optics, SeidelPSF, asymmetry, centroid_px, gaussian_psf, geometric_radius_px, radial_psf,
-    second_moment_px, wavefront_psf,
-)
-from rotstar_mrcal.optics.wavefront import TERMS, Seidel, pupil_function, wavefront
+from rotstar_mrcal.lazy import attach
 
-__all__ = [
-    "Seidel", "TERMS", "wavefront", "pupil_function",
-    "Optics", "wavefront_psf", "gaussian_psf", "SeidelPSF", "radial_psf", "LensPSF",
-    "asymmetry", "centroid_px", "second_moment_px", "geometric_radius_px",
-    "fisher_information", "crlb_cov", "crlb_rms", "closed_form_corner_bound",
-]
+# each name imported from its module when first used: importing the package imports none of them
+__getattr__, __dir__, __all__ = attach(__name__, {
+    "wavefront": ["Seidel", "TERMS", "pupil_function"],  # (the function wavefront: optics.wavefront.wavefront)
+    "psf": ["Optics", "wavefront_psf", "gaussian_psf", "SeidelPSF", "radial_psf", "LensPSF",
+            "asymmetry", "centroid_px", "second_moment_px", "geometric_radius_px"],
+    "crlb": ["fisher_information", "crlb_cov", "crlb_rms", "closed_form_corner_bound"],
+})

@@ -11,10 +11,9 @@ SYNOPSIS
     '8000-us-saturated'
 
 build_report writes OUT/index.md and index.html (report.markdown/html),
-headline.md (with the paper's claims in short when the run compares the
-paper's patterns), paper.md (simulated data: the held-out error by tilt of
-the test poses; the paper's patterns: every claim with its checks,
-validate.claims), results.json (all conditions), the summary bar charts, each
+headline.md (with the extra sections in short), paper.md (simulated data:
+the held-out error by tilt of the test poses; the extra sections whole: the
+lab's scripts/demo.py adds the paper's claims, add_sections), results.json (all conditions), the summary bar charts, each
 condition's per-pose plot and maps (copied from its rotstar-crossval
 folder), and mrcal's own views of the first method's group-A calibration
 (mrcalshow.calibration_figures: uncertainty, residuals, diff against group
@@ -33,8 +32,9 @@ import shutil
 from rotstar_mrcal.atomic import atomic_path, atomic_write
 from rotstar_mrcal.report import plots, stereo as stereoreport
 from rotstar_mrcal.evaluate.groups import Comparison
-from rotstar_lab.claims import claims, short_lines
-from rotstar_mrcal.report.page import headline, html, markdown, methods_of, paper_run, paper_section, verdicts
+from rotstar_mrcal.report.page import headline_markdown, html, markdown, methods_of, paper_section, with_sections
+from rotstar_mrcal.report.mrcalshow import calibration_figures
+import matplotlib.pyplot as plt
 
 
 def slug(s: str) -> str:
@@ -80,14 +80,13 @@ def _copy(src_dir: str, rel: str, out: str, dst_rel: str) -> str | None:
 
 
 def build_report(results, dirs, out: str, title: str, notes: str = "", extra_figures=(), mrcal_figures: bool = True,
-          log=None) -> dict:
+          log=None, sections=()) -> dict:
     """Write the report folder; returns {'index.md': path, ...}
 
     Results of format rotstar-stereo/1 (make stereo) are shown as stereo
-    sections after the conditions.
+    sections after the conditions; sections (page.Section) after the
+    headline, in paper.md and in short in headline.md.
     """
-    import matplotlib.pyplot as plt
-
     stereo = [r for r in results if r.get("format") == stereoreport.FORMAT]
     dirs = [d for r, d in zip(results, dirs) if r.get("format") != stereoreport.FORMAT]
     results = [r for r in results if r.get("format") != stereoreport.FORMAT]
@@ -150,15 +149,13 @@ def build_report(results, dirs, out: str, title: str, notes: str = "", extra_fig
             figs += _mrcal_views(r, d, out, s, log)
         per_condition[r["label"]] = figs
 
-    md = markdown(results, title, figures, per_condition, notes, stereo)
-    page = html(results, title, figures, per_condition, notes, stereo)
+    md = markdown(results, title, figures, per_condition, notes, stereo, sections)
+    page = html(results, title, figures, per_condition, notes, stereo, sections)
     head_md = ""
     paper = ""
     if results:
-        head_md = headline(results).markdown() + "\n\n" + "\n".join(f"- {v}" for v in verdicts(results)) + "\n"
-        paper = paper_section(results)  # the table by tilt (simulated) and the paper's claims (its patterns)
-        if paper_run(results):  # the claims in short under the headline too
-            head_md += "\nThe paper's claims (4.2):\n\n" + "\n".join(short_lines(claims(results))) + "\n"
+        head_md = headline_markdown(results) + "".join(f"\n{s.headline}" for s in sections if s.headline)
+        paper = paper_section(results, sections)  # the table by tilt (simulated) and the extra sections
     for r in stereo:
         head_md += ("\n" if head_md else "") + stereoreport.headline(r).markdown() + "\n"
     summary = {"format": "rotstar-report/1", "conditions": results}
@@ -168,16 +165,34 @@ def build_report(results, dirs, out: str, title: str, notes: str = "", extra_fig
              "results.json": json.dumps(summary, indent=1) + "\n"}
     if paper:
         files["paper.md"] = paper
+    _write(out, files)
+    return {k: os.path.join(out, k) for k in files}
+
+
+def add_sections(out: str, sections) -> dict:
+    """Put sections (page.Section) into the report folder OUT that build_report wrote without them: the same
+    pages as build_report(..., sections=sections) would have written; returns {'index.md': path, ...}"""
+    with open(os.path.join(out, "results.json")) as f:
+        results = json.load(f)["conditions"]
+    old = {}
+    for name in ("index.md", "index.html", "headline.md"):
+        with open(os.path.join(out, name)) as f:
+            old[name] = f.read()
+    files = with_sections(old, results, sections)
+    if not files["paper.md"]:
+        del files["paper.md"]
+    _write(out, files)
+    return {k: os.path.join(out, k) for k in files}
+
+
+def _write(out: str, files: dict) -> None:
     for name, text in files.items():  # each file whole or not at all
         with atomic_write(os.path.join(out, name)) as f:
             f.write(text)
-    return {k: os.path.join(out, k) for k in files}
 
 
 def _mrcal_views(r: dict, d: str, out: str, s: str, log=None) -> list:
     """mrcal-show-* figures of the first calibrated method's A model (B for the diff); [(caption, png)]"""
-    from rotstar_mrcal.report.mrcalshow import calibration_figures
-
     m = next((m for m in r["methods"] if (m.get("models") or {}).get("A")), None)
     if m is None:
         return []

@@ -58,6 +58,8 @@ import numpy as np
 
 from rotstar_mrcal.programs import run_tool
 from rotstar_mrcal.report.plots import nice_max
+from rotstar_mrcal.evaluate.uncertainty import projection_uncertainty
+from rotstar_mrcal.calibrate.solve import board_residuals, model_stats, stats_line
 
 TERMINAL = 'pngcairo size 1024,640 noenhanced font ",11" background "white"'
 """An opaque white background: mrcal's default PNG terminal (--hardcopy alone) is transparent"""
@@ -153,9 +155,6 @@ def gnuplot_env(env=None) -> dict:
 
 def scales(model: mrcal.cameramodel, other: mrcal.cameramodel | None = None) -> dict:
     """Colour scales and vector scales for our small errors (module doc)"""
-    from rotstar_mrcal.calibrate.solve import board_residuals
-    from rotstar_mrcal.evaluate.uncertainty import projection_uncertainty
-
     W, H = (int(v) for v in model.imagersize())
     q = np.array([[(W - 1) / 2, (H - 1) / 2], [0, 0], [W - 1, 0], [0, H - 1], [W - 1, H - 1]], float)
     u = projection_uncertainty(model, q)
@@ -263,46 +262,8 @@ def calibration_figures(model_path: str, outdir: str, other: str | None = None, 
     The first caption carries the numbers (calibrate.stats_line): outliers,
     fit RMS, worst residual, uncertainty, valid region.
     """
-    from rotstar_mrcal.calibrate.solve import model_stats, stats_line
-
     stats = model_stats(mrcal.cameramodel(model_path))
     figs = draw(show_commands(model_path, outdir, other=other, image_root=image_root, prefix=prefix))
     out = [(f.caption + (f" ({stats_line(stats)})" if i == 0 else ""), f.png, redraw_command(f))
            for i, f in enumerate(figs)]
     return out, stats
-
-
-def uncertainty_doc(model: str, img_dir: str, doc: str, halves: tuple[str, str] | None = None,
-                    splined: str | None = None, image_root: str | None = None, names: dict | None = None) -> list:
-    """Draw the figures of doc/uncertainty.md and rewrite its mrcal-show block; the Figures
-
-    model: the calibration to show; halves: the two calibrations of
-    rotstar-crossval SEQ (their diff); splined: a splined model (its
-    correction). names: {path: the name to show in the commands}. The PNGs go
-    to img_dir, linked relative to the doc.
-    """
-    from rotstar_lab.docblock import rewrite_block
-
-    figs = show_commands(model, img_dir, other=halves[0] if halves else None, image_root=image_root)
-    if halves:  # the diff of the two halves, not of the model against half A
-        d = next(f for f in figs if f.name == "diff")
-        d.argv[-2:] = list(halves)
-        s = scales(mrcal.cameramodel(halves[0]), mrcal.cameramodel(halves[1]))
-        d.argv[d.argv.index("--cbmax") + 1] = f"{s['diff_cbmax']:g}"
-    if splined:
-        figs += [f for f in show_commands(splined, img_dir) if f.name == "splined-correction"]
-    draw(figs)
-    names = {**{f.stdin: os.path.basename(f.stdin) for f in figs if f.stdin}, **(names or {})}
-
-    def shown(f):
-        cmd = redraw_command(f)
-        for path, name in sorted(names.items(), key=lambda kv: -len(kv[0])):
-            cmd = cmd.replace(os.path.abspath(path), name).replace(path, name)
-        return cmd
-
-    out = []
-    for f in figs:
-        rel = os.path.relpath(f.png, os.path.dirname(os.path.abspath(doc)))
-        out += [f"### {f.name}", "", "```", shown(f), "```", "", f"![{f.caption}]({rel})", "", f"*{f.caption}*", ""]
-    rewrite_block(doc, "mrcal-show", "\n".join(out))
-    return figs

@@ -35,56 +35,16 @@ import re
 
 import numpy as np
 
-
-def fmt(v, digits: int = 3) -> str:
-    """A number in `digits` significant figures, '-' for none"""
-    if v is None or not np.isfinite(v):
-        return "-"
-    return f"{v:.{digits}g}"
-
-
-@dataclasses.dataclass
-class Table:
-    header: list[str]
-    rows: list[list[str]]
-    caption: str = ""
-    bold: set = dataclasses.field(default_factory=set)  # (row, col) cells to emphasise
-
-    def markdown(self) -> str:
-        def cell(i, j, s):
-            return f"**{s}**" if (i, j) in self.bold and s != "-" else s
-
-        out = ["| " + " | ".join(self.header) + " |", "|" + "---|" * len(self.header)]
-        out += ["| " + " | ".join(cell(i, j, s) for j, s in enumerate(r)) + " |" for i, r in enumerate(self.rows)]
-        return "\n".join(out)
-
-    def html(self) -> str:
-        e = _html.escape
-        out = ["<table>"]
-        if self.caption:
-            out.append(f"<caption>{e(self.caption)}</caption>")
-        out.append("<tr>" + "".join(f"<th>{e(h)}</th>" for h in self.header) + "</tr>")
-        for i, r in enumerate(self.rows):
-            cells = [f"<td><b>{e(s)}</b></td>" if (i, j) in self.bold and s != "-" else f"<td>{e(s)}</td>"
-                     for j, s in enumerate(r)]
-            out.append("<tr>" + "".join(cells) + "</tr>")
-        out.append("</table>")
-        return "\n".join(out)
-
-
-def _get(d, *keys):
-    for k in keys:
-        if not isinstance(d, dict) or d.get(k) is None:
-            return None
-        d = d[k]
-    return d
+from rotstar_mrcal.report.stereo import section as stereo_section, section_html as stereo_section_html
+from rotstar_mrcal.report.table import Table, fmt, get
+from rotstar_mrcal.evaluate.tilts import by_tilt
 
 
 def _pair(m, kind):
     """(a, b) numbers of one method: held-out MRE both ways, or truth error of A and B"""
     if kind == "heldout":
-        return _get(m, "heldout", "A->B", "mean_px"), _get(m, "heldout", "B->A", "mean_px")
-    return _get(m, "truth", "A", "median_px"), _get(m, "truth", "B", "median_px")
+        return get(m, "heldout", "A->B", "mean_px"), get(m, "heldout", "B->A", "mean_px")
+    return get(m, "truth", "A", "median_px"), get(m, "truth", "B", "median_px")
 
 
 def _pair_mean(p):
@@ -141,8 +101,6 @@ def tilt_table(results) -> Table | None:
     |---|---|---|
     | rotstar | **0.1** | **0.3** |
     """
-    from rotstar_mrcal.evaluate.tilts import by_tilt
-
     per = [{m["method"]: by_tilt(m.get("heldout")) for m in r["methods"]} for r in results]
     cols = [(k, t) for k, p in enumerate(per) for t in sorted({t for v in p.values() for t in v})]
     if not cols:
@@ -179,7 +137,7 @@ def verdicts(results) -> list[str]:
             f"{k} in {wins[k]} of {n} condition{'s' if n > 1 else ''}" for k in best) + ".")
     parts = []
     for name in methods:
-        vs = [_get(_by_method(r).get(name), "crossval", "verdict") for r in results]
+        vs = [get(_by_method(r).get(name), "crossval", "verdict") for r in results]
         vs = [v for v in vs if v]
         if vs:
             c = {v: vs.count(v) for v in dict.fromkeys(vs)}
@@ -191,7 +149,7 @@ def verdicts(results) -> list[str]:
     for r in results:
         for m in r["methods"]:
             for side in "AB":
-                boards.setdefault(m["method"], []).append(_get(m, "calibration", side, "boards") or 0)
+                boards.setdefault(m["method"], []).append(get(m, "calibration", side, "boards") or 0)
     most = max((max(v) for v in boards.values()), default=0)
     short = [f"{n} {min(v)}-{max(v)}" for n, v in boards.items() if min(v) < most]
     if short:
@@ -220,10 +178,10 @@ def detail(result) -> Table:
         cal, ho, cv = m.get("calibration", {}), m.get("heldout", {}), m.get("crossval") or {}
         rows.append([
             m["method"],
-            " / ".join(str(_get(cal, s, "boards") or "-") for s in "AB"),
-            " / ".join(fmt(_get(cal, s, "rms_px")) for s in "AB"),
-            fmt(_get(ho, "A->B", "mean_px")),
-            fmt(_get(ho, "B->A", "mean_px")),
+            " / ".join(str(get(cal, s, "boards") or "-") for s in "AB"),
+            " / ".join(fmt(get(cal, s, "rms_px")) for s in "AB"),
+            fmt(get(ho, "A->B", "mean_px")),
+            fmt(get(ho, "B->A", "mean_px")),
             fmt(cv.get("diff_median_px")),
             fmt(cv.get("unc_median_px")),
             fmt(cv.get("ratio_median"), 2),
@@ -240,28 +198,63 @@ def detail(result) -> Table:
     return Table(header, rows, cap, bold)
 
 
-def paper_run(results) -> bool:
-    """Whether the run compares the paper's patterns (rotstar and the star or phase shifting)"""
-    from rotstar_lab.claims import OURS, PHASE, STAR
+@dataclasses.dataclass
+class Section:
+    """An extra section of the report, after the headline (and the table by tilt): in the page (markdown,
+    html), in paper.md (markdown) and in short under headline.md's verdicts (headline; '' for none).
+    make demo's paper claims are one (scripts/demo.py); folder.add_sections puts them in a report
+    folder already written."""
+    markdown: str
+    html: str
+    headline: str = ""
 
-    names = methods_of(results)
-    return OURS in names and (STAR in names or PHASE in names)
 
-
-def paper_section(results) -> str:
-    """Markdown: the error by tilt of the test poses and the paper's claims as verdicts ('' if neither applies)"""
-    from rotstar_lab import claims
-
+def paper_section(results, sections=()) -> str:
+    """Markdown: the error by tilt of the test poses and the extra sections ('' if there is neither)"""
     out = []
     t = tilt_table(results)
     if t is not None:
         out += ["## By tilt of the test poses", "", t.markdown(), "", f"*{t.caption}*", ""]
-    if paper_run(results):
-        out += ["## The paper's real-world claims (4.2)", "",
-                "Each claim in the paper's words, decided from the numbers above (rotstar_lab.claims); "
-                "the lowest exposure first, the saturating one last.", "",
-                claims.markdown(claims.claims(results))]
+    out += [s.markdown for s in sections]
     return "\n".join(out)
+
+
+def headline_markdown(results) -> str:
+    """headline.md's part about the conditions: the headline table and the verdicts"""
+    return headline(results).markdown() + "\n\n" + "\n".join(f"- {v}" for v in verdicts(results)) + "\n"
+
+
+def _top_markdown(results) -> list[str]:
+    h = headline(results)
+    return (["## Headline", "", h.markdown(), "", f"*{h.caption}*", ""]
+            + [f"- {v}" for v in verdicts(results)] + [""])
+
+
+def _top_html(results) -> list[str]:
+    out = ["<h2>Headline</h2>", headline(results).html(), "<ul>"]
+    out += [f"<li>{inline(v)}</li>" for v in verdicts(results)] + ["</ul>"]
+    t = tilt_table(results)
+    if t is not None:
+        out += ["<h2>By tilt of the test poses</h2>", t.html()]
+    return out
+
+
+def with_sections(page: dict, results, sections) -> dict:
+    """The pages {'index.md', 'index.html', 'headline.md'} (their text, as written without sections)
+    with the sections after the headline (and the table by tilt), and paper.md ('' when empty)"""
+    if not (results and sections):
+        return dict(page, **{"paper.md": paper_section(results)})
+    md_top = "\n".join(_top_markdown(results))
+    old = paper_section(results)
+    md = page["index.md"].replace(md_top + ("\n" + old if old else ""),
+                                  md_top + "\n" + paper_section(results, sections), 1)
+    html_top = "\n".join(_top_html(results))
+    page_html = page["index.html"].replace(html_top, "\n".join([html_top] + [s.html for s in sections]), 1)
+    head = headline_markdown(results)
+    short = "".join(f"\n{s.headline}" for s in sections if s.headline)
+    head_md = page["headline.md"].replace(head, head + short, 1)
+    return {"index.md": md, "index.html": page_html, "headline.md": head_md,
+            "paper.md": paper_section(results, sections)}
 
 
 def _alt(caption: str) -> str:
@@ -269,20 +262,18 @@ def _alt(caption: str) -> str:
     return caption.split(". Redraw:")[0].replace("[", "(").replace("]", ")")
 
 
-def markdown(results, title: str, figures=(), per_condition_figures=None, notes: str = "", stereo=()) -> str:
+def markdown(results, title: str, figures=(), per_condition_figures=None, notes: str = "", stereo=(),
+             sections=()) -> str:
     """The report page. figures: [(caption, path)] after the headline; per_condition_figures:
     {label: [(caption, path)]} after each condition's table; stereo: make stereo's results
-    (stereoreport), a section each after the conditions."""
-    from rotstar_mrcal.report.stereo import section
-
+    (stereoreport), a section each after the conditions; sections: Section's after the headline."""
     out = [f"# {title}", ""]
     if notes:
         out += [notes.strip(), ""]
     if results:
-        h = headline(results)
-        out += ["## Headline", "", h.markdown(), "", f"*{h.caption}*", ""]
-        out += [f"- {v}" for v in verdicts(results)] + [""]
-        out += [paper_section(results)] if paper_section(results) else []
+        out += _top_markdown(results)
+        paper = paper_section(results, sections)
+        out += [paper] if paper else []
     for cap, path in figures:
         out += [f"![{cap}]({path})", "", f"*{cap}*", ""]
     for r in results:
@@ -298,7 +289,7 @@ def markdown(results, title: str, figures=(), per_condition_figures=None, notes:
         if r.get("commands"):
             out += ["<details><summary>commands run</summary>", "", "```"] + r["commands"] + ["```", "",
                                                                                               "</details>", ""]
-    out += [section(s) for s in stereo]
+    out += [stereo_section(s) for s in stereo]
     out += ["See doc/validation.md for what the numbers mean and what to do when they are not good.", ""]
     return "\n".join(out)
 
@@ -321,10 +312,9 @@ def inline(text: str) -> str:
     return "".join(out)
 
 
-def html(results, title: str, figures=(), per_condition_figures=None, notes: str = "", stereo=()) -> str:
+def html(results, title: str, figures=(), per_condition_figures=None, notes: str = "", stereo=(),
+         sections=()) -> str:
     """The same page as markdown(), as standalone HTML"""
-    from rotstar_mrcal.report.stereo import section_html
-
     e = _html.escape
     out = ["<!DOCTYPE html>", "<html><head><meta charset='utf-8'>", f"<title>{e(title)}</title>",
            "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
@@ -336,19 +326,7 @@ def html(results, title: str, figures=(), per_condition_figures=None, notes: str
     if notes:
         out += [f"<p>{inline(p)}</p>" for p in notes.strip().split("\n\n")]
     if results:
-        out += ["<h2>Headline</h2>", headline(results).html(), "<ul>"]
-        out += [f"<li>{inline(v)}</li>" for v in verdicts(results)] + ["</ul>"]
-        t = tilt_table(results)
-        if t is not None:
-            out += ["<h2>By tilt of the test poses</h2>", t.html()]
-        if paper_run(results):
-            from rotstar_lab.claims import claims
-
-            out += ["<h2>The paper's real-world claims (4.2)</h2>", "<ol>"]
-            for v in claims(results):
-                out += [f"<li><b>{e(v.status)}</b> ({e(v.score)}). <i>{e(v.claim)}</i><ul>"]
-                out += [f"<li>{'yes' if c.passed else 'no'}: {e(c.text)}</li>" for c in v.checks] + ["</ul></li>"]
-            out += ["</ol>"]
+        out += _top_html(results) + [x.html for x in sections]
     for cap, path in figures:
         out.append(f"<figure><img src='{e(path)}' alt='{e(cap)}'><figcaption>{inline(cap)}</figcaption></figure>")
     for r in results:
@@ -361,6 +339,6 @@ def html(results, title: str, figures=(), per_condition_figures=None, notes: str
         if r.get("commands"):
             out.append("<details><summary>commands run</summary><pre>" + e("\n".join(r["commands"]))
                        + "</pre></details>")
-    out += [section_html(s) for s in stereo]
+    out += [stereo_section_html(s) for s in stereo]
     out += ["<p>See doc/validation.md for what the numbers mean.</p>", "</body></html>"]
     return "\n".join(out)

@@ -30,7 +30,7 @@ import html as _html
 
 import numpy as np
 
-from rotstar_mrcal.report.page import Table, _get, fmt
+from rotstar_mrcal.report.table import Table, fmt, get
 
 FORMAT = "rotstar-stereo/1"
 
@@ -59,14 +59,14 @@ def _groups(m) -> list[str]:
 
 def _camera(truth: dict, group: str, k: int):
     """Camera k's median error against the truth in one group, or None"""
-    cams = _get(truth, group, "cameras") or []
+    cams = get(truth, group, "cameras") or []
     return cams[k].get("median_px") if k < len(cams) and isinstance(cams[k], dict) else None
 
 
 def headline(result) -> Table:
     """Methods: each camera against the truth, baseline and rotation error, depth RMS at each distance (A / B)"""
     d = [f"{z:g}" for z in result.get("distances", [])]
-    ncam = max([2] + [len(_get(m, "truth", g, "cameras") or []) for m in result["methods"] for g in _groups(m)])
+    ncam = max([2] + [len(get(m, "truth", g, "cameras") or []) for m in result["methods"] for g in _groups(m)])
     header = (["method"] + [f"camera {k} vs truth, px" for k in range(ncam)]
               + ["baseline error, mm", "rotation error, deg"] + [f"depth RMS at {z} m, mm" for z in d])
     rows, vals = [], []
@@ -74,9 +74,9 @@ def headline(result) -> Table:
         gs = _groups(m)
         t = m.get("truth") or {}
         v = [[_camera(t, g, k) for g in gs] for k in range(ncam)]
-        v += [[_get(t, g, "extrinsics", "baseline_error_mm") for g in gs],
-              [_get(t, g, "extrinsics", "rotation_error_deg") for g in gs]]
-        v += [[_get(t, g, "depth", "depths", z, "rms_mm") for g in gs] for z in d]
+        v += [[get(t, g, "extrinsics", "baseline_error_mm") for g in gs],
+              [get(t, g, "extrinsics", "rotation_error_deg") for g in gs]]
+        v += [[get(t, g, "depth", "depths", z, "rms_mm") for g in gs] for z in d]
         vals.append(v)
         rows.append([m["method"]] + [_cell(c, 2 if j >= ncam + 2 else 3) for j, c in enumerate(v)])
     cap = ("Each calibration (pose group A / B) against the true rig: each camera's median projection error over "
@@ -110,17 +110,17 @@ def verdicts(result) -> list[str]:
     for m in result["methods"]:
         t = m.get("truth") or {}
         gs = sorted(t)
-        db = _worst([_get(t, g, "extrinsics", "baseline_error_mm") for g in gs])
-        dr = _worst([_get(t, g, "extrinsics", "rotation_error_deg") for g in gs])
-        b = next((_get(t, g, "extrinsics", "baseline_true_mm") for g in gs), None)
+        db = _worst([get(t, g, "extrinsics", "baseline_error_mm") for g in gs])
+        dr = _worst([get(t, g, "extrinsics", "rotation_error_deg") for g in gs])
+        b = next((get(t, g, "extrinsics", "baseline_true_mm") for g in gs), None)
         if db is not None and dr is not None:
             out.append(f"{m['method']}: baseline within {fmt(db, 2)} mm of the true {fmt(b, 3)} mm, rotation within "
                        f"{fmt(dr, 2)} deg (both calibrations).")
-        rms = [_get(t, g, "depth", "depths", far, "rms_mm") for g in gs]
+        rms = [get(t, g, "depth", "depths", far, "rms_mm") for g in gs]
         if _worst(rms) is not None:
             g = gs[int(np.nanargmax([abs(x) if x is not None else np.nan for x in rms]))]
             depth.append(f"{m['method']} {fmt(_worst(rms), 2)} mm "
-                         f"({fmt(_get(t, g, 'depth', 'depths', far, 'rms_pct'), 2)} %)")
+                         f"({fmt(get(t, g, 'depth', 'depths', far, 'rms_pct'), 2)} %)")
     if depth:
         out.append(f"Depth RMS error at {far} m, from the calibration alone (worse of A and B): "
                    + ", ".join(depth) + ".")
@@ -135,14 +135,14 @@ def depth_table(result, key: str = "depth") -> Table:
     noise = None
     for m in result["methods"]:
         for g in _groups(m):
-            e = _get(m, "truth", g, key)
+            e = get(m, "truth", g, key)
             if not e:
                 continue
             noise = e.get("noise_px") if key != "depth" else noise
             rows.append([m["method"] if not rows or rows[-1][0] != m["method"] else "", g]
-                        + [" / ".join(fmt(_get(e, "depths", z, k), 2) for k in ("mean_mm", "rms_mm", "p95_mm"))
+                        + [" / ".join(fmt(get(e, "depths", z, k), 2) for k in ("mean_mm", "rms_mm", "p95_mm"))
                            for z in d]
-                        + [fmt(_get(e, "depths", z, "rms_pct"), 2) for z in d])
+                        + [fmt(get(e, "depths", z, "rms_pct"), 2) for z in d])
     if key == "depth":
         cap = ("Depth error of the calibration alone: held-out board corners at each distance projected with the "
                "true cameras (exact pixels), rectified with the calibrated pair (mrcal.rectified_system), depth "
@@ -169,10 +169,10 @@ def crossval_table(result) -> Table:
             c = cams[k] if k < len(cams) else {}
             row.append(f"{fmt(c.get('ratio_median'), 2)} ({c.get('verdict') or c.get('error', '-')[:40]})"
                        if c else "-")
-        row += [fmt(_get(cv, "extrinsics", "baseline_error_mm"), 2),
-                fmt(_get(cv, "extrinsics", "rotation_error_deg"), 2)]
-        row += [fmt(_get(cv, "pair_diff", z, "median_px"), 2) for z in d]
-        row += [f"{fmt(_get(cv, 'depth', z, 'diff_median_mm'), 2)} ({fmt(_get(cv, 'depth', z, 'unc_median_mm'), 2)})"
+        row += [fmt(get(cv, "extrinsics", "baseline_error_mm"), 2),
+                fmt(get(cv, "extrinsics", "rotation_error_deg"), 2)]
+        row += [fmt(get(cv, "pair_diff", z, "median_px"), 2) for z in d]
+        row += [f"{fmt(get(cv, 'depth', z, 'diff_median_mm'), 2)} ({fmt(get(cv, 'depth', z, 'unc_median_mm'), 2)})"
                 for z in d]
         rows.append(row)
     cap = ("mrcal's cross-validation of the two calibrations (groups A and B): per camera the projection diff "
@@ -191,7 +191,7 @@ def calibration_table(result) -> Table:
     rows = []
     for m in result["methods"]:
         for g in _groups(m):
-            c = _get(m, "calibration", g) or []
+            c = get(m, "calibration", g) or []
             rows.append([m["method"] if not rows or rows[-1][0] != m["method"] else "", g,
                          " / ".join(str(x.get("boards", "-")) for x in c),
                          " / ".join(fmt(x.get("rms_px")) for x in c),
@@ -204,7 +204,7 @@ def calibration_table(result) -> Table:
 def tables(result) -> list[tuple[str, Table]]:
     """[(heading, table)] of the section, in order"""
     out = [("Against the true rig", headline(result)), ("Depth error", depth_table(result, "depth"))]
-    if any(_get(m, "truth", g, "depth_noisy") for m in result["methods"] for g in _groups(m)):
+    if any(get(m, "truth", g, "depth_noisy") for m in result["methods"] for g in _groups(m)):
         out.append(("Depth error with each detector's corner noise", depth_table(result, "depth_noisy")))
     if any(m.get("crossval") for m in result["methods"]):
         out.append(("Cross-validation (A against B)", crossval_table(result)))

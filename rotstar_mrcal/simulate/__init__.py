@@ -18,8 +18,8 @@ Modules, one concept each:
 
     camera    camera presets; the cached per-pixel rays of a camera model
     screen    the screen as a light source (frames -> summed-area tables)
-    render    rays -> board plane -> screen, area-sampled sub-pixels, PSF, blocks
-    optics    point-spread functions on the supersampled image
+    irradiance  rays -> board plane -> screen, area-sampled sub-pixels, PSF, blocks
+    blur      point-spread functions on the supersampled image
     exposure  gain, black level, noise, saturation, 8/16-bit quantisation
     poses     random calibration poses that keep the board inside the image;
               boards hanging over the image's edges (partial views)
@@ -30,24 +30,15 @@ Modules, one concept each:
 See doc/simulator.md.
 """
 
-from rotstar_mrcal.simulate.camera import PRESETS, RayGrid, camera_rays, fov_deg, preset_model
-from rotstar_mrcal.simulate.dataset import (
-    Settings, Truth, load_truth, pose_names, render_pose, true_corners, write_dataset,
-)
-from rotstar_mrcal.simulate.exposure import expose, full_scale_code
-from rotstar_mrcal.simulate.blur import GaussianPSF, KernelPSF, TiledPSF, as_psf, gaussian_kernel
-from rotstar_mrcal.simulate.poses import (
-    default_distance_range, hanging_poses, look_at_pose, pose_ok, random_poses, tilt_angle,
-)
-from rotstar_mrcal.simulate.irradiance import render_irradiance
-from rotstar_mrcal.simulate.screen import Screen, exact_frames, make_screen, png_frames, shown_light
+from rotstar_mrcal.lazy import attach
 
-__all__ = [
-    "PRESETS", "RayGrid", "camera_rays", "fov_deg", "preset_model",
-    "Settings", "Truth", "load_truth", "pose_names", "render_pose", "true_corners", "write_dataset",
-    "expose", "full_scale_code",
-    "GaussianPSF", "KernelPSF", "TiledPSF", "as_psf", "gaussian_kernel",
-    "default_distance_range", "hanging_poses", "look_at_pose", "pose_ok", "random_poses", "tilt_angle",
-    "render_irradiance",
-    "Screen", "exact_frames", "make_screen", "png_frames", "shown_light",
-]
+# each name imported from its module when first used: importing the package imports none of them
+__getattr__, __dir__, __all__ = attach(__name__, {
+    "camera": ["PRESETS", "RayGrid", "camera_rays", "fov_deg", "preset_model"],
+    "dataset": ["Settings", "Truth", "load_truth", "pose_names", "render_pose", "true_corners", "write_dataset"],
+    "exposure": ["expose", "full_scale_code"],
+    "blur": ["GaussianPSF", "KernelPSF", "TiledPSF", "as_psf", "gaussian_kernel"],
+    "poses": ["default_distance_range", "hanging_poses", "look_at_pose", "pose_ok", "random_poses", "tilt_angle"],
+    "irradiance": ["render_irradiance"],
+    "screen": ["Screen", "exact_frames", "make_screen", "png_frames", "shown_light"],
+})

@@ -50,6 +50,7 @@ import multiprocessing
 import os
 import time
 
+import cv2
 import mrcal
 import numpy as np
 
@@ -160,8 +161,6 @@ _STATE: dict = {}
 
 
 def _setup(layout, frames, model_args, grid, settings, psf):
-    import cv2
-
     model = mrcal.cameramodel(intrinsics=model_args[0], imagersize=model_args[1])
     if grid is not None:
         remember_rays(model, grid)

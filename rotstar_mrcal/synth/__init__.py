@@ -19,10 +19,10 @@ Modules, one concept each:
     patterns   the checkerboard, rotating-star and 16-segment-star corners as wedges,
                the phase shifts as fringes
     views      the poses: a tilt phi about an in-plane axis at angle alpha
-    render     exact sub-pixel coverage, PSF convolution, block summation; the
+    imaging    exact sub-pixel coverage, PSF convolution, block summation; the
                pixel-integrated gradients for the Cramer-Rao bound
     refiners   OpenCV cornerSubPix, the saddle fit, the symmetric refinement (Eq. 1),
-               the phase-shift corner (detect.phase); which applies to which pattern
+               the phase-shift corner (peers.phase); which applies to which pattern
     metrics    pairwise-distance range, RMS error, failure rate
     experiment the protocol and one task: render, expose, refine
     sweep      run the configurations on local processes or Dask, cached
@@ -33,23 +33,3 @@ Modules, one concept each:
 
 The command line is rotstar-synth (rotstar_mrcal.cli.synth); see doc/optics.md.
 """
-
-from rotstar_mrcal.synth import verdicts
-from rotstar_mrcal.synth.experiment import (
-    ABERRATIONS, SYMMETRIC, Protocol, psf_kernel, quick_protocol, render_views, run_task,
-)
-from rotstar_mrcal.synth.metrics import failure_rate, pairwise_range, rms_error
-from rotstar_mrcal.synth.patterns import PATTERNS, Fringe, Star, pattern_frames, phase_frames
-from rotstar_mrcal.synth.refiners import REFINERS, applies, refine
-from rotstar_mrcal.synth.sweep import pending_tasks, run_sweep
-from rotstar_mrcal.synth.table import over_tilts, tabulate
-
-__all__ = [
-    "ABERRATIONS", "SYMMETRIC", "Protocol", "psf_kernel", "quick_protocol", "render_views", "run_task",
-    "failure_rate", "pairwise_range", "rms_error",
-    "PATTERNS", "Fringe", "Star", "pattern_frames", "phase_frames",
-    "REFINERS", "applies", "refine",
-    "pending_tasks", "run_sweep",
-    "over_tilts", "tabulate",
-]
-# (the verdicts module, not its function, is rotstar_mrcal.synth.verdicts)

@@ -57,6 +57,7 @@ from __future__ import annotations
 import numpy as np
 
 from rotstar_mrcal.peers.registry import REFINERS as WEDGE_REFINERS, refiner
+from rotstar_mrcal.peers.phase import phase_corners
 
 PHASE = "phase"
 REFINERS = tuple(WEDGE_REFINERS) + (PHASE,)
@@ -82,8 +83,6 @@ def refine_phase(frames: np.ndarray, starts: np.ndarray, window=None) -> np.ndar
 
     `window` is ignored: the planes are fitted in detect.phase.HALF_WINDOW.
     """
-    from rotstar_mrcal.peers.phase import phase_corners
-
     f = np.asarray(frames, float)
     if f.ndim != 3 or f.shape[0] != 8:
         raise ValueError(f"the phase refiner needs 8 frames (4 steps along x, then y), not {f.shape}")

@@ -38,8 +38,10 @@ from __future__ import annotations
 import concurrent.futures
 import multiprocessing
 import os
+import signal
 import tempfile
 
+import cv2
 import numpy as np
 
 from rotstar_mrcal.synth.experiment import SYMMETRIC, Protocol, run_task
@@ -75,8 +77,6 @@ def pending_tasks(protocol: Protocol, cache_dir: str) -> list[tuple[str, float, 
 
 
 def _run(protocol: Protocol, task):
-    import cv2
-
     cv2.setNumThreads(1)
     a, phi, noises = task
     return task, run_task(protocol, a, phi, noises)
@@ -84,8 +84,6 @@ def _run(protocol: Protocol, task):
 
 def _ignore_sigint() -> None:
     """Workers: Ctrl-C (sent to the whole process group) is the parent's to handle"""
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
@@ -104,6 +102,8 @@ def run_sweep(protocol: Protocol, cache_dir: str, jobs: int = 1, scheduler: str 
             progress(done, total, f"{a} phi={phi:g}")
 
     if tasks and scheduler:
+        # (here, not at the top: dask.distributed costs 0.8-1.2 s of start-up, python -X importtime,
+        # and only --dask needs it)
         from dask.distributed import Client, as_completed
 
         with Client(scheduler) as client:

@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 
 import numpy as np
 
@@ -95,8 +96,6 @@ class _quiet:
     """Silence numpy's 'mean of empty slice' warnings (all-NaN columns are expected: failures)"""
 
     def __enter__(self):
-        import warnings
-
         self._w = warnings.catch_warnings()
         self._w.__enter__()
         warnings.simplefilter("ignore", RuntimeWarning)

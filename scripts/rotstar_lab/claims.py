@@ -45,12 +45,14 @@ to"), SIGNIFICANT (factor for "degraded significantly").
 
 from __future__ import annotations
 
+import html as _html
 import math
 
 import numpy as np
 
 from rotstar_mrcal.synth.verdicts import Check, Verdict
 from rotstar_mrcal.evaluate.tilts import by_tilt
+from rotstar_mrcal.report.page import Section, methods_of
 
 OURS = "rotstar"
 STAR = "star"
@@ -313,3 +315,29 @@ def markdown(verdicts) -> str:
         out += [f"{v.finding}. **{v.status}** ({v.score}). *{v.claim}*"]
         out += [f"   - {'yes' if c.passed else 'no'}: {c.text}" for c in v.checks]
     return "\n".join(out) + "\n"
+
+
+def applies(results) -> bool:
+    """Whether the run compares the paper's patterns (rotstar and the star or phase shifting)"""
+    names = methods_of(results)
+    return OURS in names and (STAR in names or PHASE in names)
+
+
+def section(results) -> Section | None:
+    """The report's section of the claims (rotstar_mrcal.report.page.Section): every claim with its checks in
+    the page and paper.md, one line each under headline.md's verdicts; None when the run does not compare
+    the paper's patterns"""
+    if not applies(results):
+        return None
+    v = claims(results)
+    md = "\n".join(["## The paper's real-world claims (4.2)", "",
+                    "Each claim in the paper's words, decided from the numbers above (rotstar_lab.claims); "
+                    "the lowest exposure first, the saturating one last.", "", markdown(v)])
+    e = _html.escape
+    out = ["<h2>The paper's real-world claims (4.2)</h2>", "<ol>"]
+    for x in v:
+        out += [f"<li><b>{e(x.status)}</b> ({e(x.score)}). <i>{e(x.claim)}</i><ul>"]
+        out += [f"<li>{'yes' if c.passed else 'no'}: {e(c.text)}</li>" for c in x.checks] + ["</ul></li>"]
+    out += ["</ol>"]
+    head = "The paper's claims (4.2):\n\n" + "\n".join(short_lines(v)) + "\n"
+    return Section(md, "\n".join(out), head)

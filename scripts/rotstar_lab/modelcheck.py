@@ -32,6 +32,8 @@ import mrcal
 import numpy as np
 
 from rotstar_mrcal.programs import run_tool
+from rotstar_mrcal.evaluate.truth import truth_error, truth_poses_of
+from rotstar_mrcal.simulate.dataset import load_truth
 
 TOLERANCE = 2.0
 """A default model passes within this factor of the better of the two"""
@@ -57,9 +59,6 @@ def printed_command(stderr: str) -> list[str]:
 
 def vs_truth(model_path: str, seq: str) -> dict:
     """{'median_px', 'worst_px'} of a model against the dataset's true camera"""
-    from rotstar_mrcal.simulate.dataset import load_truth
-    from rotstar_mrcal.evaluate.truth import truth_error, truth_poses_of
-
     model = mrcal.cameramodel(model_path)
     t = load_truth(seq)
     e = truth_error(model, t.model, truth_poses_of(model, t.rt_cam_board))

@@ -38,6 +38,7 @@ import sys
 import time
 
 from rotstar_mrcal.programs import run_tool
+from rotstar_mrcal.atomic import atomic_write
 
 
 def log(msg: str) -> None:
@@ -93,8 +94,6 @@ class Clock:
 
     def finish(self) -> None:
         """This run, complete, becomes the one the next run's estimates go by"""
-        from rotstar_mrcal.atomic import atomic_write
-
         with atomic_write(self.path) as f:
             json.dump({"steps": list(zip(self.names, self.times)), "wall_s": self.elapsed(),
                        "cores": os.cpu_count()}, f)

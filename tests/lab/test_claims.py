@@ -105,10 +105,27 @@ def test_the_report_tabulates_by_tilt_and_states_the_claims():
     assert t.header[:4] == ["method", "2000 us: 0 deg", "2000 us: 30 deg", "2000 us: 60 deg"]
     rows = {r[0]: r for r in t.rows}
     assert rows["star"][3] == "0.04" and (0, 3) in t.bold  # rotstar best at 60 degrees
-    sec = report.paper_section(runs)
+    sec = report.paper_section(runs, [claims.section(runs)])
     assert "## By tilt of the test poses" in sec and "## The paper's real-world claims (4.2)" in sec
-    page = report.html(runs, "t")
+    page = report.html(runs, "t", sections=[claims.section(runs)])
     assert "By tilt of the test poses" in page and "real-world claims" in page
     # real data (no tilts) and a run without the paper's patterns: neither section
     plain = [{"label": "x", "methods": [{"method": "rotstar", "heldout": {"A->B": {"mean_px": 0.1}}}]}]
-    assert report.tilt_table(plain) is None and report.paper_section(plain) == ""
+    assert report.tilt_table(plain) is None and claims.section(plain) is None and report.paper_section(plain) == ""
+
+
+def test_the_claims_added_to_a_written_report_are_the_report_written_with_them(tmp_path):
+    """make demo: rotstar-report writes the report, scripts/demo.py adds the claims (report.folder.add_sections);
+    the same pages as the report written with the claims' section"""
+    from rotstar_mrcal.report.folder import add_sections, build_report
+
+    runs = [paper_like(k) for k in range(3)]
+    sec = claims.section(runs)
+    direct = build_report(runs, [str(tmp_path)] * 3, str(tmp_path / "direct"), "t", mrcal_figures=False,
+                          sections=[sec])
+    build_report(runs, [str(tmp_path)] * 3, str(tmp_path / "added"), "t", mrcal_figures=False)
+    added = add_sections(str(tmp_path / "added"), [sec])
+    assert sorted(added) == ["headline.md", "index.html", "index.md", "paper.md"]
+    for name, path in added.items():
+        assert open(path).read() == open(direct[name]).read(), name
+    assert "The paper's claims (4.2):" in open(added["headline.md"]).read()

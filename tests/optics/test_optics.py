@@ -9,8 +9,9 @@ import pytest
 
 from rotstar_mrcal.optics import (
     Optics, Seidel, SeidelPSF, asymmetry, centroid_px, closed_form_corner_bound, crlb_rms,
-    fisher_information, gaussian_psf, radial_psf, second_moment_px, wavefront, wavefront_psf,
+    fisher_information, gaussian_psf, radial_psf, second_moment_px, wavefront_psf,
 )
+from rotstar_mrcal.optics.wavefront import wavefront
 from rotstar_mrcal.optics.crlb import crlb_cov
 from rotstar_mrcal.simulate.blur import KernelPSF
 from rotstar_mrcal.synth.bound import pattern_bounds

@@ -70,12 +70,20 @@ import numpy as np
 
 from rotstar_mrcal import dataset as ds
 from rotstar_mrcal.pattern.layout import Layout, make_layout
-from rotstar_mrcal.simulate.dataset import Settings, Truth, pose_names, true_corners
-from rotstar_mrcal.simulate.poses import look_at_pose, random_poses
+from rotstar_mrcal.simulate.dataset import (
+    load_truth, pose_names, Settings, true_corners, Truth, write_dataset, write_truth,
+)
+from rotstar_mrcal.simulate.poses import (
+    board_samples, default_distance_range, look_at_pose, random_poses, REFERENCE_DISTANCE_M,
+)
 from rotstar_mrcal.simulate.camera import preset_model
-from rotstar_mrcal.simulate.dataset import write_truth
-from rotstar_mrcal.simulate.poses import REFERENCE_DISTANCE_M, board_samples, default_distance_range
 from rotstar_mrcal.evaluate.uncertainty import imager_grid, projection_uncertainty
+from rotstar_mrcal.calibrate.solve import calibrate, CalibrationError
+from rotstar_mrcal.vnl import write_corners
+from rotstar_mrcal.calibrate.cornerset import load_corner_set
+from rotstar_mrcal.detect.run import detect_dataset
+from rotstar_mrcal.dataset import open_dataset
+from rotstar_mrcal.evaluate.truth import truth_error, truth_poses_of
 
 CAPTURES = ("whole", "edges")
 ZONES = ("top-left", "top-right", "bottom-left", "bottom-right", "left", "right", "top", "bottom")
@@ -248,8 +256,6 @@ def measure(model: mrcal.cameramodel, truth_model: mrcal.cameramodel, rt_cam_boa
     Each holds 'corners' (the four values: top-left, top-right, bottom-left,
     bottom-right), 'corners_mean', 'ring_rms', 'ring_median', 'centre_median'.
     """
-    from rotstar_mrcal.evaluate.truth import truth_error, truth_poses_of
-
     where = regions(model.imagersize()) if where is None else where
     rt = truth_poses_of(model, rt_cam_board)
     out = {}
@@ -279,9 +285,6 @@ def truth_noise_corners(model, layout: Layout, rts, sigma: float = NOISE_PX, see
 
 def detected_corners(seq: str, jobs: int = 1, progress=None) -> list[np.ndarray | None]:
     """rotstar's corners of every pose of seq (detect.run.detect_dataset), None where it found no board"""
-    from rotstar_mrcal.dataset import open_dataset
-    from rotstar_mrcal.detect.run import detect_dataset
-
     det = detect_dataset(open_dataset(seq), jobs=jobs, progress=progress)
     return [r.corners.corners if r.found else None for r in det.results()]
 
@@ -346,17 +349,12 @@ class CoverageResult:
 def calibrate_capture(seq: str, name: str, files: list[str], boards: list, outdir: str, lensmodel: str,
                       plan: Plan, idx: list[int], log=None) -> CaptureResult:
     """Write seq/<name>.vnl, calibrate it (validate.calibrate.calibrate, one lens model), measure it"""
-    from rotstar_mrcal.calibrate.solve import calibrate
-    from rotstar_mrcal.calibrate.cornerset import load_corner_set
-    from rotstar_mrcal.vnl import write_corners
-
     vnl = os.path.join(seq, f"{name}.vnl")
     with open(vnl, "w") as f:
         sparse = write_corners(f, [(files[i], boards[i]) for i in idx])
     cs = load_corner_set(vnl)
     c = calibrate(cs, outdir, spec=lensmodel, keep=True, in_process=True, log=log)
     if not c.model_path:  # an implausible fit is not written even with keep
-        from rotstar_mrcal.calibrate.solve import CalibrationError
 
         raise CalibrationError(f"{vnl}: no model: " + "; ".join(c.failures))
     model = mrcal.cameramodel(c.model_path)
@@ -379,8 +377,6 @@ def run(work: str, n: int = 20, hanging: int = 8, seed: int = 0, corners: str = 
         layout: Layout | None = None, lensmodel: str = "LENSMODEL_OPENCV8", settings: Settings | None = None,
         jobs: int = 1, log=None) -> CoverageResult:
     """Simulate, detect (or truth+noise), calibrate and measure both captures; see the module doc"""
-    from rotstar_mrcal.simulate.dataset import write_dataset
-
     log = log or (lambda s: None)
     if corners not in ("detect", "truth+noise"):
         raise ValueError(f"corners must be 'detect' or 'truth+noise', not {corners!r}")
@@ -492,9 +488,6 @@ def figure(r: CoverageResult, fn: str, gridn: int = RING_GRID) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
-
-    from rotstar_mrcal.simulate.dataset import load_truth
-    from rotstar_mrcal.evaluate.truth import truth_error, truth_poses_of
 
     models = {k: mrcal.cameramodel(c.model) for k, c in r.captures.items()}
     seq = os.path.dirname(os.path.dirname(os.path.abspath(next(iter(r.captures.values())).model)))

@@ -79,6 +79,7 @@ from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.simulate.captures import averaged_captures, lit_box
 from rotstar_mrcal.simulate.visibility import in_view, true_windows
 from rotstar_lab.benchmark.scoring import MATCH_PX, perturbed_start
+from rotstar_mrcal.peers.phase import phase_corners
 
 COMA, FOCUS = 1.5, 0.3  # waves at the image corners: make demo's lens (demo.scene.COMA_WAVES, FOCUS_WAVES)
 ENCODED_GAMMA = 2.2  # the display gamma the pattern's 8-bit values are encoded for
@@ -193,8 +194,6 @@ def _screen(gamma: float, kinds: tuple):
 def _found(name: str, q: PoseImages):
     """(corners (ny, nx, 2) or None, per-corner reasons or None, why)"""
     if name == "phase-keep":
-        from rotstar_mrcal.peers.phase import phase_corners
-
         r = phase_corners(q.phase, q.start, q.layout.corner_phase(), q.full_scale, saturation="keep")
         return r.corners, r.reason, ""
     f = METHODS[name](q)

@@ -28,8 +28,12 @@ import shutil
 import subprocess
 import sys
 
+from rotstar_lab.benchmark.timing import pin_one_cpu
 from rotstar_mrcal.peers.registry import METHODS, PoseImages
 from rotstar_mrcal.programs import run_tool
+
+LAB_PATH = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+"""scripts/, where the probe's process finds rotstar_lab (the lab is not installed)"""
 
 
 def proc_status_kb(key: str) -> int:
@@ -43,8 +47,6 @@ def memory_probe(name: str, data: str) -> dict:
     data: a pickle of the method's PoseImages (rotstar caches its detection in
     a PoseImages, so every call gets a fresh copy).
     """
-    from rotstar_lab.benchmark.timing import pin_one_cpu
-
     with open(data, "rb") as f:
         blob = f.read()
     m = METHODS[name]
@@ -76,7 +78,8 @@ def program_maxrss_kb(png: str, gridn: int, args: tuple, tmp: str) -> int | None
 
 def measure_memory(inputs: dict[str, PoseImages], tmp: str, log=None) -> dict:
     """Peak memory of every method on its input of one pose ({method: PoseImages}, see the module doc)"""
-    env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="65536", MALLOC_TRIM_THRESHOLD_="65536")
+    env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="65536", MALLOC_TRIM_THRESHOLD_="65536",
+               PYTHONPATH=os.pathsep.join([LAB_PATH] + [v for v in [os.environ.get("PYTHONPATH")] if v]))
     out = {}
     for name, p in inputs.items():
         m = METHODS[name]

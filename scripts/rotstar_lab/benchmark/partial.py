@@ -63,11 +63,16 @@ import time
 
 import mrcal
 import numpy as np
+import cv2
 
 from rotstar_mrcal import simulate
 from rotstar_mrcal.parallel import process_map
 from rotstar_mrcal.pattern.layout import Layout, make_layout
 from rotstar_mrcal.simulate.poses import hanging_poses
+from rotstar_mrcal.simulate.captures import averaged_captures, lit_box
+from rotstar_mrcal.peers.charuco import charuco_board, detect_charuco, render_charuco
+from rotstar_mrcal.peers.registry import METHODS as REGISTRY, PoseImages
+from rotstar_mrcal.simulate.visibility import half_spacing, in_view, seen
 
 LENSES = ("d435", "wide")
 CONDITIONS = {  # name: (gain: full-scale fraction for a white screen seen head-on, read noise in DN of 8 bits)
@@ -163,18 +168,12 @@ _W: dict = {}  # the worker's layout, cameras, rays, screen and ChArUco detector
 
 def screen_frames(layout: Layout) -> np.ndarray:
     """The frames the views show: the rotating-star and identity frames of layout.frames(), then the ChArUco board"""
-    from rotstar_mrcal.peers.charuco import render_charuco
-
     seq = [f for f in layout.frames() if f["kind"] in ("rotstar", "identity")]
     return np.concatenate((simulate.exact_frames(layout, seq), render_charuco(layout)[None].astype(np.float32)))
 
 
 def init_worker(layout: Layout, cameras: dict, rays: dict) -> None:
     """cameras: lens -> (intrinsics, imagersize); rays: lens -> its RayGrid (computed once in the parent)"""
-    import cv2
-
-    from rotstar_mrcal.peers.charuco import charuco_board
-
     cv2.setNumThreads(1)
     models = {k: mrcal.cameramodel(intrinsics=v[0], imagersize=v[1]) for k, v in cameras.items()}
     for k, m in models.items():
@@ -185,18 +184,12 @@ def init_worker(layout: Layout, cameras: dict, rays: dict) -> None:
 
 def view_truth(model, layout: Layout, rt) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(true corners (ny, nx, 2) NaN where not seen, in view (ny, nx), half spacings (ny, nx))"""
-    from rotstar_mrcal.simulate.visibility import half_spacing, in_view, seen
-
     truth, _ = seen(model, mrcal.transform_point_rt(np.asarray(rt, float), layout.board_points()))
     return truth, in_view(model, layout, rt), half_spacing(truth)
 
 
 def view_job(view: View, seed: int) -> ViewResult:
     """Render one view, expose it in its condition, detect with both methods, score (after init_worker)"""
-    from rotstar_mrcal.peers.registry import METHODS as REGISTRY, PoseImages
-    from rotstar_mrcal.peers.charuco import detect_charuco
-    from rotstar_mrcal.simulate.captures import averaged_captures, lit_box
-
     t0 = time.perf_counter()
     layout, model = _W["layout"], _W["models"][view.lens]
     E = simulate.render_irradiance(_W["screen"], model, view.rt, supersample=SUPERSAMPLE, psf=PSF_SIGMA,

@@ -34,6 +34,7 @@ import time
 
 import mrcal
 import numpy as np
+import cv2
 
 from rotstar_mrcal import simulate
 from rotstar_mrcal.parallel import process_map
@@ -96,8 +97,6 @@ _W: dict = {}  # the worker's scene, rays and screens (init_renderer)
 
 
 def init_renderer(scene: Scene, rays) -> None:
-    import cv2
-
     cv2.setNumThreads(1)
     cb = [f for f in scene.square.frames() if f["kind"] == "checkerboard"]
     room = scene.settings.room
@@ -147,8 +146,6 @@ def render_all(scene: Scene, jobs: int, log=None) -> list[RenderedPose]:
 
 def write_square_png(folder: str, p: RenderedPose, full_scale: float) -> str:
     """The averaged square checkerboard as an 8-bit PNG (mrgingham works on 8 bits); its path"""
-    import cv2
-
     fn = os.path.join(folder, f"square{p.index:03d}.png")
     cv2.imwrite(fn, np.clip(np.round(p.checker_square * (255.0 / full_scale)), 0, 255).astype(np.uint8))
     return fn

@@ -59,8 +59,11 @@ import tempfile
 import time
 
 import numpy as np
+import cv2
 
 from rotstar_mrcal.programs import run_tool
+from rotstar_mrcal.detect.pipeline import detect_pose
+from rotstar_mrcal import dataset
 
 GOAL_RATIO = 2.0  # detect (start-up included) / decode
 GOAL_VS_MRGINGHAM = 0.5  # rotstar-detect / mrgingham on the same images
@@ -203,8 +206,6 @@ class SpeedResult:
 @contextlib.contextmanager
 def one_cpu():
     """Pin this process (and the children it starts) to one CPU with one OpenCV thread"""
-    import cv2
-
     before, threads = os.sched_getaffinity(0), cv2.getNumThreads()
     cpu = min(before)
     os.sched_setaffinity(0, {cpu})
@@ -239,9 +240,6 @@ def detect_command() -> list[str]:
 
 def measure_speed(seq: str, repeats: int = 3, mrgingham: bool = True, log=None) -> SpeedResult:
     """Time decoding and detection per pose, the command and mrgingham; see the module doc"""
-    from rotstar_mrcal import dataset
-    from rotstar_mrcal.detect.pipeline import detect_pose
-
     log = log or (lambda msg: None)
     pattern, layout = dataset.read_pattern(seq)
     frames = pattern["frames"]
@@ -292,9 +290,6 @@ def profile_pose(seq: str, pose: str | None = None, top: int = 12, runs: int = 5
     Each entry: function ('module.py:line(name)' or '{builtin}'), calls,
     own ms and cumulative ms per detect_pose call (the mean over `runs`).
     """
-    from rotstar_mrcal import dataset
-    from rotstar_mrcal.detect.pipeline import detect_pose
-
     pattern, layout = dataset.read_pattern(seq)
     pose = pose or dataset.list_poses(seq, pattern["frames"])[0]
     p = dataset.load_pose(seq, pose, pattern["frames"])
@@ -334,8 +329,6 @@ def write_dataset(folder: str, layout, poses: list[tuple], bits: int) -> str:
     are written as 8- or 16-bit PNGs (values rounded and clipped), one folder
     per pose named pose000, pose001, ...
     """
-    from rotstar_mrcal import dataset
-
     poses = [tuple(p) + (None,) * (3 - len(p)) for p in poses]
     if any(p[2] is None for p in poses):
         layout = dataclasses.replace(layout, identity=False)

@@ -22,8 +22,10 @@ import os
 import platform
 import re
 import shutil
+import dataclasses
 
 import numpy as np
+import cv2
 
 from rotstar_mrcal.peers.registry import METHODS
 from rotstar_mrcal.programs import run_tool
@@ -169,8 +171,6 @@ def package_version(name: str) -> str:
 
 
 def machine() -> dict:
-    import cv2
-
     cpu = "?"
     try:
         with open("/proc/cpuinfo") as f:
@@ -213,8 +213,6 @@ def run_line(started, mach: dict, scene, tilts, dist, wall: float, render: float
 def bench_json(started, mach: dict, wall: float, render: float, jobs: int, scene, run, summary: dict,
                goals: dict, cal: dict, cal_lensmodel: str, captures: int) -> dict:
     """Everything of a run, for bench.json ('rotstar-bench/2'; methods keyed by their registry names)"""
-    import dataclasses
-
     from rotstar_lab.benchmark.scoring import MATCH_PX, START_PERTURB_PX
 
     st = scene.settings

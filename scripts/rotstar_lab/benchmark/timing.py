@@ -20,12 +20,11 @@ from __future__ import annotations
 import os
 import resource
 import time
+import cv2
 
 
 def pin_one_cpu() -> int:
     """Run this process on one CPU, with one OpenCV thread; returns the CPU"""
-    import cv2
-
     cpu = min(os.sched_getaffinity(0))
     os.sched_setaffinity(0, {cpu})
     cv2.setNumThreads(1)

@@ -32,11 +32,18 @@ import os
 import time
 
 import numpy as np
+import mrcal
+import cv2
 
 from rotstar_mrcal.parallel import process_map
 from rotstar_lab.demo.scene import (
     CAPTURES, EXPOSURES, NOISE, PATTERN_GAMMA, SCREEN_GAMMA, SHOT, coma_psf, exposure_dir,
 )
+from rotstar_mrcal.peers.cornersets import detect_methods
+from rotstar_mrcal.simulate.captures import averaged_captures, lit_box
+from rotstar_mrcal.peers.charuco import detect_charuco, render_charuco
+from rotstar_mrcal import dataset, simulate
+from rotstar_mrcal.simulate.screen import shown_light
 
 
 @dataclasses.dataclass
@@ -66,13 +73,6 @@ _W: dict = {}  # the worker's layouts, model, rays, PSF and screens (init_worker
 
 
 def init_worker(layout, square, model_args, rays, charuco: bool = False) -> None:
-    import cv2
-    import mrcal
-
-    from rotstar_mrcal import simulate
-    from rotstar_mrcal.peers.charuco import render_charuco
-    from rotstar_mrcal.simulate.screen import shown_light
-
     cv2.setNumThreads(1)
     model = mrcal.cameramodel(intrinsics=model_args[0], imagersize=model_args[1])
     simulate.camera.remember_rays(model, rays)
@@ -88,13 +88,6 @@ def init_worker(layout, square, model_args, rays, charuco: bool = False) -> None
 
 def capture_pose(job: Job) -> PoseResult:
     """Render one pose once; per exposure: expose, detect every method, write the square board PNG"""
-    import cv2
-
-    from rotstar_mrcal import dataset, simulate
-    from rotstar_mrcal.peers.charuco import detect_charuco
-    from rotstar_mrcal.simulate.captures import averaged_captures, lit_box
-    from rotstar_mrcal.peers.cornersets import detect_methods
-
     t0 = time.perf_counter()
     layout, model = _W["layout"], _W["model"]
     kw = dict(supersample=2, psf=_W["psf"], rays=_W["rays"])
@@ -155,8 +148,6 @@ def capture_all(jobs: int, layout, square, model, rts: dict, rts_square: dict, s
 
     charuco: also OpenCV's ChArUco detector, found[label]["charuco"].
     """
-    from rotstar_mrcal import simulate
-
     todo = [Job(g, i, rts[g][i], rts_square[g][i], seed, out, keep_images, tuple(methods), charuco)
             for g in rts for i in range(len(rts[g]))]
     init = (layout, square, (model.intrinsics(), model.imagersize()), simulate.camera_rays(model), charuco)

@@ -33,6 +33,13 @@ import math
 import os
 
 import numpy as np
+from rotstar_mrcal.peers.registry import reason_counts
+from rotstar_mrcal.optics.wavefront import Seidel
+from rotstar_mrcal.optics.psf import Optics, radial_psf
+from rotstar_mrcal.simulate.dataset import true_corners
+from rotstar_mrcal.simulate.poses import look_at_pose, pose_ok
+from rotstar_mrcal.pattern.layout import make_layout
+from rotstar_mrcal import dataset, simulate
 
 COMA_WAVES = 1.5  # Seidel coma at the image corners (h = 1), waves
 FOCUS_WAVES = 0.3  # field curvature: defocus at the image corners, waves
@@ -60,9 +67,6 @@ def exposure_dir(out: str, label: str) -> str:
 
 def camera_and_boards(pattern_dir: str):
     """(the true camera model, the pattern's layout, the square SQUARE_N x SQUARE_N board on the same screen)"""
-    from rotstar_mrcal import dataset, simulate
-    from rotstar_mrcal.pattern.layout import make_layout
-
     _, layout = dataset.read_pattern(pattern_dir)
     square = make_layout(screen=(layout.screen_width, layout.screen_height), pixel_pitch_m=layout.pixel_pitch_m,
                          pitch=layout.pitch, band=layout.band, nx=SQUARE_N, ny=SQUARE_N)
@@ -71,8 +75,6 @@ def camera_and_boards(pattern_dir: str):
 
 def pose_group(model, layout, targets, distance, tilt_axis_deg, roll_deg, tilts=TILTS, margin=20.0) -> np.ndarray:
     """The board turned about one axis at each target; a target moves toward the centre until it fits"""
-    from rotstar_mrcal.simulate.poses import look_at_pose, pose_ok
-
     W, H = model.imagersize()
     c = np.array(((W - 1) / 2, (H - 1) / 2))
     out = []
@@ -97,17 +99,12 @@ def group_poses(model, layout, tilts=TILTS) -> dict[str, np.ndarray]:
 
 def reach_px(model, layout, rts: dict) -> dict[str, float]:
     """{group: the 90th percentile of its corners' distance from the image centre, px}"""
-    from rotstar_mrcal.simulate.dataset import true_corners
-
     c = (np.array(model.imagersize()) - 1) / 2
     return {g: float(np.percentile(np.linalg.norm(true_corners(model, layout, v) - c, axis=-1), 90))
             for g, v in rts.items()}
 
 
 def coma_psf(imagersize):
-    from rotstar_mrcal.optics.psf import Optics, radial_psf
-    from rotstar_mrcal.optics.wavefront import Seidel
-
     W, H = imagersize
     centre = ((W - 1) / 2, (H - 1) / 2)
     return radial_psf(Seidel(coma=COMA_WAVES, tilt=-COMA_WAVES, focus=FOCUS_WAVES), centre, Optics(),
@@ -156,8 +153,6 @@ def rejection_notes(rejected: dict) -> str:
     Corners rejected: phase at 2000 us: 2 of 8 (2 saturated: a sample at full scale).
     <BLANKLINE>
     """
-    from rotstar_mrcal.peers.registry import reason_counts
-
     parts = []
     for label, per_pose in rejected.items():
         for m in dict.fromkeys(k for p in per_pose for k in p):

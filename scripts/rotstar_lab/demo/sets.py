@@ -20,6 +20,10 @@ import time
 
 from rotstar_mrcal.peers.registry import METHODS
 from rotstar_lab.demo.scene import EXPOSURES, SQUARE_N, exposure_dir
+from rotstar_mrcal.peers.checkerboard import mrgingham_detect
+from rotstar_mrcal.vnl import write_corners
+from rotstar_mrcal.simulate.dataset import Truth, write_truth
+from rotstar_mrcal import dataset, simulate
 
 # the image a method's corners of one pose are written against, by what it needs
 FIRST_FILE = {"rotstar": "rotstar_00.png", "checkerboard": "checkerboard.png", "phase": "phase_x_0.png",
@@ -31,10 +35,6 @@ def write_group(edir, group, layout, model, rts, corners_by_method, square, rts_
 
     corners_by_method: {method: per pose (corners or None, weights or None)}.
     """
-    from rotstar_mrcal import dataset, simulate
-    from rotstar_mrcal.simulate.dataset import Truth, write_truth
-    from rotstar_mrcal.vnl import write_corners
-
     for name, lay, poses in ((group, layout, rts), (f"{group}-square", square, rts_square)):
         seq = os.path.join(edir, name)
         os.makedirs(seq, exist_ok=True)
@@ -58,9 +58,6 @@ def write_group(edir, group, layout, model, rts, corners_by_method, square, rts_
 
 def program_sets(out: str, npose: dict[str, int], name: str = "mrgingham", log=None) -> dict[tuple, str]:
     """Run a square-board program method once over every square-board image; write <exposure>/<g>-square/<name>.vnl"""
-    from rotstar_mrcal.peers.checkerboard import mrgingham_detect
-    from rotstar_mrcal.vnl import write_corners
-
     paths = {}
     for label, _ in EXPOSURES:
         for g, n in npose.items():
