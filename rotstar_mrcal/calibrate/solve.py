@@ -62,8 +62,8 @@ import numpy as np
 
 from rotstar_mrcal.atomic import atomic_path
 from rotstar_mrcal.programs import run_tool
-from rotstar_mrcal.calibrate.command import (  # noqa: F401 hint_command: cli/detect.py imports it from here
-    DEFAULT_KNOTS_X, LEAN_LENSMODEL, InputError, calibrate_argv, command_line, hint_command, image_glob,
+from rotstar_mrcal.calibrate.command import (
+    DEFAULT_KNOTS_X, LEAN_LENSMODEL, InputError, calibrate_argv, command_line, image_glob,
     mrcal_corners, recommended_lensmodel, reseeded_argv, resolve_lensmodel,
 )
 from rotstar_mrcal.calibrate.checks import (

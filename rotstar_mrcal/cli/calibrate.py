@@ -12,8 +12,8 @@ from rotstar_mrcal import dataset
 from rotstar_mrcal.calibrate import checks, rig, solve as cal
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
 from rotstar_mrcal.cli.common import HelpFormatter, atomic_write, exit_status_help, make_folder, run, say
-from rotstar_mrcal.detect.rig import detect_rig
 from rotstar_mrcal.detect.run import detect_dataset
+from rotstar_mrcal.peers.registry import REFINERS
 from rotstar_mrcal.vnl import write_corners
 
 DESCRIPTION = f"""\
@@ -103,15 +103,15 @@ def detect_corners(a) -> tuple[str | None, int]:
     vnl = os.path.join(a.outdir, "corners.vnl")
     say("$ " + cal.command_line(["rotstar-detect", a.seq, "-o", vnl, "--jobs", str(a.jobs), "--refine", a.refine]
                                 + ["--weights"] * a.weights) + "    # (run here, in this process)")
-    multi = dataset.is_multi_camera(a.seq)
     step = (lambda r: say(f"{r.pose}: " + (f"{r.corners.n_valid} corners" if r.found else f"skipped: {r.error}")))
     try:
-        det = (detect_rig(a.seq, refine=a.refine, jobs=a.jobs, progress=lambda k, r: step(r)) if multi else
-               detect_dataset(a.seq, refine=a.refine, jobs=a.jobs, progress=step))
+        ds = dataset.open_dataset(a.seq)
+        multi = len(ds.cameras) > 1
+        det = detect_dataset(ds, refine=REFINERS[a.refine], jobs=a.jobs, progress=step)
     except dataset.DatasetError as e:
         say(f"rotstar-calibrate: {e}")
         return None, 2
-    if not det.results:
+    if not det.results():
         say(f"rotstar-calibrate: {a.seq}: no pose folders with frames from pattern.json")
         return None, 2
     with atomic_write(vnl) as f:

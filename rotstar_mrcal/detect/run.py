@@ -43,7 +43,7 @@ camera that moved during the sequence, with how far it moved. With several
 cameras, each pose's boards are checked to be labelled alike in every camera
 (rig.check_labelling); a pose that is not is dropped from every camera. The
 focal seed and the command come from the boards mrcal keeps
-(calibrate.focal.estimate_focal; calibrate.solve.hint_command for one camera,
+(calibrate.focal.estimate_focal; calibrate.command.hint_command for one camera,
 calibrate.rig.rig_argv for several: the builders rotstar-calibrate uses).
 corners_file names the corners in the command, weights adds mrcal's
 --corners-cache-has-weights. Nothing here prints: `progress(result)` is
@@ -59,8 +59,7 @@ import os
 import numpy as np
 
 from rotstar_mrcal.calibrate.focal import estimate_focal
-from rotstar_mrcal.calibrate.rig import rig_argv, rig_globs
-from rotstar_mrcal.calibrate.solve import LEAN_LENSMODEL, command_line, hint_command
+from rotstar_mrcal.calibrate.command import LEAN_LENSMODEL, command_line, hint_command, rig_argv, rig_globs
 from rotstar_mrcal.dataset import Dataset, DatasetError, Pose, load_pose, pattern_file
 from rotstar_mrcal.parallel import process_map
 from rotstar_mrcal.pattern.layout import Layout
