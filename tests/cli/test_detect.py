@@ -269,6 +269,7 @@ def progress_messages(stderr: str) -> set[str]:
             for line in stderr.splitlines() if re.match(r"\[\d+/\d+\] ", line)}
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 def test_jobs_2_gives_identical_stdout(bad_run, bad_seq, run_cli, tmp_path):
     seq, _ = bad_seq
     r2 = run_cli("rotstar-detect", "--jobs", "2", seq, cwd=tmp_path)

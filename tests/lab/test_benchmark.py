@@ -127,6 +127,7 @@ def restore_affinity():
     cv2.setNumThreads(threads)
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 def test_render_is_seeded_and_independent_of_processes(tiny):
     one = scenes.render_all(tiny, 1)
     two = scenes.render_all(tiny, 2)

@@ -140,6 +140,7 @@ def test_doc_refused_for_the_machinery_check(tmp_path):
     assert open(doc).read() == before and (tmp_path / "results.json").exists()
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 def test_detected_on_a_small_camera(tmp_path):
     """rotstar's detection on rendered frames (640 x 400, a 6 x 4 board): every pose accounted for"""
     layout = make_layout(screen=(800, 600), pitch=100, band=24)

@@ -62,6 +62,7 @@ def test_fitted_pose():
     assert not simulate.pose_ok(model, layout, closer, F.MARGIN_PX)  # as close as it fits
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 def test_tiny_run():
     """A few renders of a small board, Gaussian blur: every table has its rows and methods, saturation
     rejects the phase corners with the reason and the clipped-keeping phase still reports them"""

@@ -135,6 +135,7 @@ def restore_threads():
     cv2.setNumThreads(threads)
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 def test_a_few_views(layout, restore_threads):
     """One hanging view per lens and a whole board on the wide lens: no wrong label"""
     views = partial.make_views(1, 1, seed=0, layout=layout)

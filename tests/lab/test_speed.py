@@ -12,6 +12,7 @@ from rotstar_lab.benchmark import speed
 from rotstar_mrcal.pattern.layout import make_layout
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 def test_measure_speed_on_two_poses(d435_seq, tmp_path):
     seq = tmp_path / "seq"
     seq.mkdir()

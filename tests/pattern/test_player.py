@@ -258,6 +258,7 @@ def test_expected_levels_match_the_pngs(ipad):
 
 
 # ---- browser tests ---------------------------------------------------------
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 @needs_chromium
 @pytest.mark.parametrize("dpr", [1, 2])
 def test_frames_pixel_exact(ipad, browsers, dpr):
@@ -297,6 +298,7 @@ def test_check_screen_stripes_exact(ipad, browsers, dpr):
     assert tuple(shot[H // 2, 9]) == (0x22, 0x44, 0x00)
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 @needs_chromium
 def test_warning_fractional_dpr_and_wrong_size(ipad, browsers):
     url = (ipad / "player.html").as_uri()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import json
 import os
 import re
@@ -12,6 +13,7 @@ from evaluate.test_validate import corner_dataset
 from rotstar_mrcal.report import page as report
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 def test_report_builds_from_a_small_simulated_run(run_cli, tmp_path):
     sets = []
     for name, sigma in (("sharp", 0.03), ("noisy", 0.3)):

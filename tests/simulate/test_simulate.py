@@ -317,6 +317,7 @@ def test_write_dataset_loads_and_truth_roundtrips(tmp_path, pinhole, frames):
     assert np.array(d["poses"]["pose001"]["corners"]).shape == (LAYOUT.ny, LAYOUT.nx, 2)
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 def test_dataset_does_not_depend_on_jobs(tmp_path, pinhole, frames):
     rts = random_poses(pinhole, LAYOUT, 2, np.random.default_rng(9))
     a, b = str(tmp_path / "a"), str(tmp_path / "b")

@@ -303,6 +303,7 @@ def quick_run(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow  # make test-slow: an end-to-end run, left out of make test
 def test_quick_experiment_outputs(quick_run, capsys):
     names = set(os.listdir(quick_run))
     assert {"table.md", "table.json", "summary.md", "protocol.json", "psf.png", "views.png",
