@@ -15,6 +15,9 @@ VENV_BIN := $(CURDIR)/.venv/bin
 GNUPLOT_BIN := $(CURDIR)/.tools/gnuplot
 RUN := PATH="$(GNUPLOT_BIN):$(VENV_BIN):$$PATH"
 PYTEST_ARGS ?=
+# the tests run in TEST_JOBS processes (pytest-xdist), a test file per process so that its fixtures are made once
+TEST_JOBS ?= auto
+XDIST := -n $(TEST_JOBS) --dist loadfile
 DEMO_DIR ?= demo-out
 STEREO_DIR ?= stereo-out
 BENCH_ARGS ?=
@@ -74,12 +77,12 @@ setup: .venv/.synced system-deps
 	@$(VENV_BIN)/python -m compileall -q rotstar_mrcal >/dev/null  # the project's own modules, as above
 
 test: setup
-	$(RUN) $(VENV_BIN)/python -m pytest -q $(PYTEST_ARGS)
+	$(RUN) $(VENV_BIN)/python -m pytest -q $(XDIST) $(PYTEST_ARGS)
 
 # the long end-to-end runs that make test leaves out (marked slow): whole benchmarks in small, every
 # player check in chromium, the report of a simulated run, the plain-pip install (make pip-check)
 test-slow: setup
-	$(RUN) $(VENV_BIN)/python -m pytest -q -m slow --ignore=tests/cli/test_pip_install.py $(PYTEST_ARGS)
+	$(RUN) $(VENV_BIN)/python -m pytest -q $(XDIST) -m slow --ignore=tests/cli/test_pip_install.py $(PYTEST_ARGS)
 
 demo: setup
 	$(RUN) $(VENV_BIN)/python scripts/demo.py --out $(DEMO_DIR)

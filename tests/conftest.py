@@ -20,6 +20,7 @@ runs the tests (its bin/ first on PATH, as `make test` does).
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import math
 import os
 import subprocess
@@ -30,7 +31,8 @@ import numpy as np
 import pytest
 
 from rotstar_mrcal.pattern.layout import Layout, make_layout
-from rotstar_mrcal.simulate import Settings, Truth, look_at_pose, preset_model, random_poses, write_dataset
+from rotstar_mrcal.simulate import (Settings, Truth, load_truth, look_at_pose, preset_model, random_poses,
+                                   write_dataset)
 
 VENV_BIN = os.path.dirname(sys.executable)
 D435_SETTINGS = Settings(bits=16, seed=0)  # blur 1 px, noise 1%, gain 0.9, area sampling
@@ -73,10 +75,20 @@ def d435_poses(model, layout) -> np.ndarray:
 
 @pytest.fixture(scope="session")
 def d435_seq(tmp_path_factory) -> SimSeq:
+    """Rendered once per run: under pytest-xdist (make test's -n 2) the first worker renders it into the
+    run's shared temporary folder while the other waits on a lock, then reads it back"""
     model, layout = preset_model("d435"), make_layout()
-    seq = str(tmp_path_factory.mktemp("d435") / "seq")
-    truth = write_dataset(seq, layout, model, d435_poses(model, layout), D435_SETTINGS, jobs=2,
-                          extra={"camera": "d435"})
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # shared by the workers of this run
+    seq, done = str(root / "d435-shared" / "seq"), root / "d435-shared.done"
+    with open(root / "d435-shared.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if done.exists():
+            return SimSeq(seq, load_truth(seq), layout)
+        truth = write_dataset(seq, layout, model, d435_poses(model, layout), D435_SETTINGS, jobs=2,
+                              extra={"camera": "d435"})
+        done.touch()
     return SimSeq(seq, truth, layout)
 
 

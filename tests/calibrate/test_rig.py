@@ -305,6 +305,7 @@ def test_simulate_rig_arguments(tmp_path, capsys):
         assert e.value.code == 2 and msg in capsys.readouterr().err
 
 
+@pytest.mark.slow  # make test-slow: a longer end-to-end run
 def test_simulate_rig_with_a_seidel_lens(tmp_path, capsys):
     """--rig with --seidel: every camera renders through the wavefront lens over its own imager (the right
     imager's amplitudes x0.9), recorded in the truth; the images are blurrier than without a PSF"""

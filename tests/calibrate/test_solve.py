@@ -76,6 +76,7 @@ def test_default_run_reports_what_mrcal_says(calibrated, d435_seq, run_cli, tmp_
     assert truth_error(model, truth.model, truth_poses_of(model, truth.rt_cam_board)).median < 0.05
 
 
+@pytest.mark.slow  # make test-slow: a longer end-to-end run
 def test_splined_on_few_boards_is_refused_or_fails_its_checks(calibrated, d435_seq, run_cli, tmp_path):
     """The issue's case: 12 boards, splined. Refused before mrcal; forced, it fails its checks; --keep keeps it"""
     _, out = calibrated
@@ -128,6 +129,7 @@ def test_focal_seed_needs_agreeing_boards(tmp_path):
         cal.focal_seed(cs)
 
 
+@pytest.mark.slow  # make test-slow: a longer end-to-end run
 def test_calibrate_tries_splined_only_when_supported(tmp_path):
     """40 boards over the imager: both fitted and compared; the result says which it wrote and why"""
     vnl = corner_dataset(str(tmp_path / "d"), 44, seed=5, sigma=0.01)

@@ -166,6 +166,7 @@ def run_capture(argv, capsys, source=None, stdin: str | None = None, monkeypatch
     return code, out, err
 
 
+@pytest.mark.slow  # make test-slow: a longer end-to-end run
 def test_capture_auto_two_poses_from_a_replay(loop_frames, pattern_dir, tmp_path, capsys):
     """Pose A (still), the camera moving, pose B (still, the board elsewhere): two poses, then the end"""
     A = np.concatenate([loop_frames] * 3)[:400]

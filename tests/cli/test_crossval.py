@@ -109,6 +109,7 @@ def test_unreadable_models_are_named(run_cli, tmp_path, heldout_run):
     assert r.returncode == 2 and "has no optimization_inputs" in r.stderr
 
 
+@pytest.mark.slow  # make test-slow: a longer end-to-end run
 def test_one_dataset_is_split_in_two(d435_seq, run_cli, tmp_path):
     """rotstar-crossval SEQ: interleaved halves of one recording, written for mrcal's own tools too"""
     xdir = tmp_path / "xval"

@@ -611,6 +611,7 @@ def test_run_turns_failures_into_a_line_and_a_code(capsys):
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
 
 
+@pytest.mark.slow  # make test-slow: a longer end-to-end run
 def test_synth_sigterm_stops_at_once_and_leaves_no_worker(tmp_path):
     """The sweep's pool (spawned workers) is terminated too, not drained first"""
     p = subprocess.Popen([os.path.join(VENV_BIN, "rotstar-synth"), "experiment", "--quick", "--jobs", "2",

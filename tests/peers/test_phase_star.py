@@ -81,6 +81,7 @@ def test_phase_saturation_rejects_corners_with_the_reason(paper_seq):
     assert np.array_equal(np.isnan(f.corners[..., 0]), on_left) and f.reasons[on_left][0].startswith("saturated")
 
 
+@pytest.mark.slow  # make test-slow: a longer end-to-end run
 def test_saturated_exposure_cli(tmp_path, run_cli):
     """Overexposed (the white at 1.3 x full scale): rotstar still finds the board; phase says every corner is
     saturated and writes no board"""
