@@ -119,18 +119,19 @@ def tan_in_glass(D: np.ndarray, h: np.ndarray, glass: Glass) -> np.ndarray:
 def apparent_points(c: np.ndarray, p: np.ndarray, glass: Glass) -> np.ndarray:
     """Where on its own plane a flat board model sees emitting points p (..., 3) from the camera at c
 
-    c and p in the board frame (metres, glass normal +z, camera on the -z
-    side); each point's glass surface is t in front of it (a warped board is
-    flat locally). Returns (..., 3): p moved away from the camera's foot by
+    c and p in the board frame (metres, glass normal z; the glass is on the
+    camera's side); each point's glass surface is t in front of it (a warped
+    board is flat locally). Returns (..., 3): p moved away from the camera's foot by
     t (tan(theta) - tan(theta_g)); NaN where the camera is not in front of
     the glass.
     """
     t = glass.thickness_m
-    p = np.asarray(p, float)
     c = np.asarray(c, float)
+    p = np.asarray(p, float)
+    p = np.broadcast_to(p, np.broadcast_shapes(p.shape, c.shape))
     if glass.none:
         return p.copy()
-    h = (p[..., 2] - c[..., 2]) - t
+    h = np.abs(p[..., 2] - c[..., 2]) - t  # whichever side of the board the camera is on
     v = c[..., :2] - p[..., :2]
     D = np.linalg.norm(v, axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
