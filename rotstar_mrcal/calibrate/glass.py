@@ -139,8 +139,8 @@ def cost_at(oi0: dict, thickness_mm: float, index: float) -> float:
 def parabola(t: np.ndarray, c: np.ndarray) -> tuple[float, float]:
     """(vertex, second derivative) of the least-squares parabola through (t, c)
 
-        >>> parabola(np.array((0.0, 1, 2, 3)), np.array((4.0, 1, 0, 1)))
-        (2.0, 2.0)
+        >>> [round(v, 9) for v in parabola(np.array((0.0, 1, 2, 3)), np.array((4.0, 1, 0, 1)))]
+        [2.0, 2.0]
     """
     a, b, _ = np.polyfit(t, c, 2)
     return (float(-b / (2 * a)) if a > 0 else float("nan")), float(2 * a)
