@@ -41,9 +41,14 @@ the input model is kept unchanged. An estimate above MAX_PLAUSIBLE_MM is not
 a cover glass but another pose-dependent error with the same sign (a lens
 whose entrance pupil moves with the field angle, which mrcal's central models
 cannot represent, is one; the screen's own geometry another): it is reported,
-not applied, and the input model is kept. Otherwise the model re-solved at
-the estimate is the result. A thickness given by the user is applied as
-given.
+not applied, and the input model is kept. So is an estimate that the boards
+do not agree on: the thickness is estimated again from the less tilted half
+of the boards and from the more tilted half (a glass is one thickness for
+all; a moving entrance pupil shifts corners with the field angle, not with
+the board's tilt, so its two halves differ), and halves more than
+HALVES_Z of their combined sigma apart are "another pose-dependent error".
+Otherwise the model re-solved at the estimate is the result. A thickness
+given by the user is applied as given.
 """
 
 from __future__ import annotations
@@ -67,6 +72,12 @@ COARSE_MM = (0.0, 1.0, 2.0, 4.0)
 
 FINE_STEP_MM = 0.25
 """Half-width of the second parabola around the first one's vertex"""
+
+HALVES_Z = 3.0
+"""The less and the more tilted half of the boards disagree on the thickness beyond this many sigma: no glass"""
+
+MIN_HALF_BOARDS = 5
+"""Fewer boards in a half: the halves are not compared"""
 
 
 def board_points(oi: dict) -> np.ndarray:
@@ -159,6 +170,7 @@ class GlassResult:
     rms_before_px: float  # fit RMS (per corner, 2-D) without and with the correction
     rms_after_px: float
     costs: dict  # thickness mm -> C(t), every thickness evaluated
+    halves: list | None = None  # [[t, sigma] of the less tilted half of the boards, [t, sigma] of the more tilted]
     model: mrcal.cameramodel | None = None  # the result (the input model when not applied)
 
     def to_json(self) -> dict:
@@ -204,6 +216,47 @@ def estimate_thickness(oi0: dict, index: float = DEFAULT_INDEX) -> tuple[float, 
     return t_hat, float(np.sqrt(2 * (c_hat / dof) / curv)), costs
 
 
+def board_tilts(oi: dict) -> np.ndarray:
+    """Degrees between each observed board's normal and the line of sight to its centre: (Nobs,)"""
+    rt = cam_from_frame(oi)
+    centre = mrcal.transform_point_rt(rt, board_points(oi).reshape(-1, 3).mean(axis=0))
+    normal = mrcal.R_from_r(rt[:, :3])[:, :, 2]
+    cos = np.abs(np.sum(normal * centre, axis=-1)) / np.linalg.norm(centre, axis=-1)
+    return np.degrees(np.arccos(np.clip(cos, 0, 1)))
+
+
+def subset_inputs(oi: dict, keep: np.ndarray) -> dict:
+    """oi with only the board observations keep (indices), their frames renumbered; solved again"""
+    out = copy.deepcopy(oi)
+    idx = oi["indices_frame_camintrinsics_camextrinsics"][keep].copy()
+    frames, idx[:, 0] = np.unique(idx[:, 0], return_inverse=True)
+    out["indices_frame_camintrinsics_camextrinsics"] = idx.astype(np.int32)
+    out["observations_board"] = oi["observations_board"][keep].copy()
+    out["rt_ref_frame"] = oi["rt_ref_frame"][frames].copy()
+    if oi.get("imagepaths") is not None:
+        out["imagepaths"] = np.asarray(oi["imagepaths"])[keep]
+    mrcal.optimize(**out)
+    return out
+
+
+def halves_estimates(oi0: dict, index: float) -> list | None:
+    """[[t, sigma] from the less tilted half of the boards, [t, sigma] from the more tilted], or None if few"""
+    order = np.argsort(board_tilts(oi0), kind="stable")
+    if len(order) < 2 * MIN_HALF_BOARDS:
+        return None
+    half = len(order) // 2
+    return [list(estimate_thickness(subset_inputs(oi0, np.sort(part)), index)[:2])
+            for part in (order[:half], order[half:])]
+
+
+def halves_disagree(halves: list | None) -> bool:
+    """The two halves' thicknesses more than HALVES_Z combined sigma apart (or one has no estimate)"""
+    if halves is None:
+        return False
+    (a, sa), (b, sb) = halves
+    return not (np.isfinite(a) and np.isfinite(b)) or abs(a - b) > HALVES_Z * np.hypot(sa, sb)
+
+
 def _rms(oi: dict) -> float:
     c, n = board_cost(oi)
     return float(np.sqrt(2 * c / n)) if n else float("nan")
@@ -228,12 +281,13 @@ def correct_glass(model: mrcal.cameramodel, thickness_mm: float | None = None,
     if thickness_mm is not None:
         if thickness_mm == 0:
             return GlassResult(0.0, float("nan"), index, True, False, "no glass (as given)", before, before,
-                               {0.0: board_cost(oi0)[0]}, model)
+                               {0.0: board_cost(oi0)[0]}, model=model)
         oi = solve_with_glass(oi0, thickness_mm, index)
         return GlassResult(float(thickness_mm), float("nan"), index, True, True, "as given", before, _rms(oi),
-                           {float(thickness_mm): board_cost(oi)[0]}, corrected_model(model, oi))
+                           {float(thickness_mm): board_cost(oi)[0]}, model=corrected_model(model, oi))
     t_hat, sigma, costs = estimate_thickness(oi0, index)
-    keep = lambda why: GlassResult(t_hat, sigma, index, False, False, why, before, before, costs, model)  # noqa: E731
+    keep = lambda why: GlassResult(t_hat, sigma, index, False, False, why, before, before, costs,  # noqa: E731
+                                   model=model)
     if not np.isfinite(t_hat):
         return keep("the fit's cost has no minimum in the thickness")
     if t_hat > MAX_PLAUSIBLE_MM:
@@ -241,6 +295,14 @@ def correct_glass(model: mrcal.cameramodel, thickness_mm: float | None = None,
                     "(e.g. a moving entrance pupil), not applied")
     if t_hat <= 2 * sigma:
         return keep("no glass: the estimate is within 2 sigma of 0")
+    halves = halves_estimates(oi0, index)
+    if halves_disagree(halves):
+        (a, sa), (b, sb) = halves
+        r = keep(f"the less and the more tilted boards disagree ({a:.3f} +- {sa:.3f} vs {b:.3f} +- {sb:.3f} mm): "
+                 "another pose-dependent error (e.g. a moving entrance pupil), not applied")
+        r.halves = halves
+        return r
     oi = solve_with_glass(oi0, t_hat, index)
-    return GlassResult(t_hat, sigma, index, False, True, "estimated from the data", before, _rms(oi), costs,
-                       corrected_model(model, oi))
+    return GlassResult(t_hat, sigma, index, False, True, "estimated from the data" + (
+        "" if halves else f" (fewer than {2 * MIN_HALF_BOARDS} boards: the halves not compared)"), before, _rms(oi),
+        costs, halves, model=corrected_model(model, oi))
