@@ -172,10 +172,17 @@ class GlassResult:
     costs: dict  # thickness mm -> C(t), every thickness evaluated
     halves: list | None = None  # [[t, sigma] of the less tilted half of the boards, [t, sigma] of the more tilted]
     model: mrcal.cameramodel | None = None  # the result (the input model when not applied)
+    inputs: dict | None = None  # the re-solved optimization inputs when applied (every camera of a rig)
+
+    def models(self, inputs_models: list) -> list:
+        """Every camera of the problem re-solved (the input models, camera by camera, when not applied)"""
+        if self.inputs is None:
+            return list(inputs_models)
+        return [corrected_model(m, self.inputs, k) for k, m in enumerate(inputs_models)]
 
     def to_json(self) -> dict:
         d = {k: (None if isinstance(v, float) and not np.isfinite(v) else v)  # JSON has no NaN
-             for k, v in dataclasses.asdict(self).items() if k != "model"}
+             for k, v in dataclasses.asdict(self).items() if k not in ("model", "inputs")}
         d["costs"] = {f"{k:.4g}": v for k, v in sorted(self.costs.items())}
         return d
 
@@ -240,12 +247,19 @@ def subset_inputs(oi: dict, keep: np.ndarray) -> dict:
 
 
 def halves_estimates(oi0: dict, index: float) -> list | None:
-    """[[t, sigma] from the less tilted half of the boards, [t, sigma] from the more tilted], or None if few"""
-    order = np.argsort(board_tilts(oi0), kind="stable")
-    if len(order) < 2 * MIN_HALF_BOARDS:
+    """[[t, sigma] from the less tilted half of the boards, [t, sigma] from the more tilted], or None if few
+
+    The halves are halves of the board poses (frames), by their mean tilt
+    over the cameras that saw them: every camera of a rig keeps boards in both.
+    """
+    iframe = oi0["indices_frame_camintrinsics_camextrinsics"][:, 0]
+    nframes = len(oi0["rt_ref_frame"])
+    tilt = np.bincount(iframe, board_tilts(oi0), nframes) / np.maximum(np.bincount(iframe, None, nframes), 1)
+    order = np.argsort(tilt, kind="stable")
+    if nframes < 2 * MIN_HALF_BOARDS:
         return None
-    half = len(order) // 2
-    return [list(estimate_thickness(subset_inputs(oi0, np.sort(part)), index)[:2])
+    half = nframes // 2
+    return [list(estimate_thickness(subset_inputs(oi0, np.flatnonzero(np.isin(iframe, part))), index)[:2])
             for part in (order[:half], order[half:])]
 
 
@@ -263,7 +277,7 @@ def _rms(oi: dict) -> float:
 
 
 def corrected_model(model: mrcal.cameramodel, oi: dict, icam: int = 0) -> mrcal.cameramodel:
-    """Camera icam of a re-solved problem, with the input model's valid-intrinsics region"""
+    """Camera icam of a re-solved problem, with the input model's (camera icam's) valid-intrinsics region"""
     out = mrcal.cameramodel(optimization_inputs=oi, icam_intrinsics=icam)
     vir = model.valid_intrinsics_region()
     if vir is not None:
@@ -273,7 +287,12 @@ def corrected_model(model: mrcal.cameramodel, oi: dict, icam: int = 0) -> mrcal.
 
 def correct_glass(model: mrcal.cameramodel, thickness_mm: float | None = None,
                   index: float = DEFAULT_INDEX) -> GlassResult:
-    """Estimate (thickness_mm None) or apply a cover glass to a solved calibration; module doc"""
+    """Estimate (thickness_mm None) or apply a cover glass to a solved calibration; module doc
+
+    model: any camera of the solve (its optimization_inputs hold the whole
+    problem; a rig's every camera); .model is camera 0 of the result,
+    .models() every camera.
+    """
     oi0 = model.optimization_inputs()
     oi0["do_apply_outlier_rejection"] = False
     mrcal.optimize(**oi0)  # the baseline: the same solver and corners as the corrected solves
@@ -284,7 +303,7 @@ def correct_glass(model: mrcal.cameramodel, thickness_mm: float | None = None,
                                {0.0: board_cost(oi0)[0]}, model=model)
         oi = solve_with_glass(oi0, thickness_mm, index)
         return GlassResult(float(thickness_mm), float("nan"), index, True, True, "as given", before, _rms(oi),
-                           {float(thickness_mm): board_cost(oi)[0]}, model=corrected_model(model, oi))
+                           {float(thickness_mm): board_cost(oi)[0]}, model=corrected_model(model, oi), inputs=oi)
     t_hat, sigma, costs = estimate_thickness(oi0, index)
     keep = lambda why: GlassResult(t_hat, sigma, index, False, False, why, before, before, costs,  # noqa: E731
                                    model=model)
@@ -305,4 +324,4 @@ def correct_glass(model: mrcal.cameramodel, thickness_mm: float | None = None,
     oi = solve_with_glass(oi0, t_hat, index)
     return GlassResult(t_hat, sigma, index, False, True, "estimated from the data" + (
         "" if halves else f" (fewer than {2 * MIN_HALF_BOARDS} boards: the halves not compared)"), before, _rms(oi),
-        costs, halves, model=corrected_model(model, oi))
+        costs, halves, model=corrected_model(model, oi), inputs=oi)

@@ -67,7 +67,8 @@ unrefracted pixel would have been seen, the fit solved again, the thickness
 that fits best found with its uncertainty) and the model re-solved for it is
 written when the estimate is a plausible glass; an estimate beyond
 {MAX_PLAUSIBLE_MM:g} mm is reported as another pose-dependent error and not applied.
---glass MM gives the thickness (0: no correction); one camera only.
+--glass MM gives the thickness (0: no correction); a rig gets one thickness
+for all its cameras.
 """
 
 EPILOG = """\
@@ -157,7 +158,8 @@ def calibrate(a, vnl: str, layout):
         rs = rig.load_rig_corners(vnl, a.seq, a.imagersize)
         if a.dry_run:
             return say("$ " + cal.command_line(rig.first_argv(rs, a.outdir, a.lensmodel, a.focal)))
-        return rig.calibrate_rig(rs, a.outdir, a.lensmodel, a.focal, keep=a.keep, log=log)
+        return rig.calibrate_rig(rs, a.outdir, a.lensmodel, a.focal, keep=a.keep, log=log, glass_mm=a.glass,
+                                 glass_index=a.glass_index)
     cs = load_corner_set(vnl, imagersize=a.imagersize, truth=False, layout=layout)
     if a.dry_run:
         return say("$ " + cal.command_line(cal.first_argv(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, a.force)))

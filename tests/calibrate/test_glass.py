@@ -138,3 +138,51 @@ def test_rotstar_calibrate_bad_glass(bad, tmp_path, capsys):
         calibrate_main([str(tmp_path), *bad])
     assert e.value.code == 2
     assert capsys.readouterr().err.strip().splitlines()[-1].startswith(f"rotstar-calibrate: error: argument {bad[0]}")
+
+
+RT_CAM1_REF = np.array((0.0, 0.01, 0.0, -0.05, 0.0, 0.0))
+
+
+@pytest.fixture(scope="module")
+def rig_plain():
+    """Two cameras 50 mm apart see the same boards through 1 mm of glass, calibrated plainly (mrcal.optimize)"""
+    rt_cam1_ref = RT_CAM1_REF = np.array((0.0, 0.01, 0.0, -0.05, 0.0, 0.0))
+    qs, idx = [], []
+    for k, rt_ref in enumerate((np.zeros(6), rt_cam1_ref)):
+        rts = mrcal.compose_rt(rt_ref, RTS)
+        c = mrcal.transform_point_rt(mrcal.invert_rt(rts), np.zeros(3))
+        a = apparent_points(c[:, None, None, :], LAYOUT.board_points()[None], Glass.mm(1.0))
+        qs.append(mrcal.project(mrcal.transform_point_rt(rts[:, None, None, :], a), *MODEL.intrinsics()))
+        idx.append(np.column_stack((np.arange(N), np.full(N, k), np.full(N, k - 1))))
+    idx = np.concatenate(idx)
+    order = np.argsort(idx[:, 0], kind="stable")  # mrcal wants the observations frame by frame
+    q = np.concatenate(qs)[order] + np.random.default_rng(8).normal(0, 0.005, (2 * N, LAYOUT.ny, LAYOUT.nx, 2))
+    oi = problem(q[:N])
+    oi.update(observations_board=np.concatenate((q, np.ones(q.shape[:-1] + (1,))), axis=-1),
+              indices_frame_camintrinsics_camextrinsics=idx[order].astype(np.int32),
+              intrinsics=np.repeat(oi["intrinsics"], 2, axis=0), rt_cam_ref=(rt_cam1_ref * 1.01)[None],
+              imagersizes=np.repeat(oi["imagersizes"], 2, axis=0))
+    mrcal.optimize(**oi)
+    return [mrcal.cameramodel(optimization_inputs=oi, icam_intrinsics=k) for k in (0, 1)]
+
+
+def _rig_corrected(plain, g):
+    fixed = g.models(plain)
+    for k in (0, 1):
+        assert error(fixed[k]) < 0.5 * error(plain[k])
+    base = lambda m: m.extrinsics_rt_fromref()[3:]  # noqa: E731
+    assert np.linalg.norm(base(fixed[1]) - RT_CAM1_REF[3:]) < np.linalg.norm(base(plain[1]) - RT_CAM1_REF[3:])
+
+
+def test_a_rig_is_corrected_with_one_thickness(rig_plain):
+    g = correct_glass(rig_plain[0], thickness_mm=1.0)
+    assert g.applied and g.given
+    _rig_corrected(rig_plain, g)
+
+
+@pytest.mark.slow
+def test_a_rigs_thickness_is_estimated(rig_plain):
+    """(9 s) the estimate, its halves split by board pose, both cameras"""
+    g = correct_glass(rig_plain[0])
+    assert g.applied and abs(g.thickness_mm - 1.0) < max(0.1, 2 * g.sigma_mm) and g.halves is not None
+    _rig_corrected(rig_plain, g)
