@@ -11,7 +11,7 @@ import sys
 from rotstar_mrcal import dataset
 from rotstar_mrcal.calibrate import checks, rig, solve as cal
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
-from rotstar_mrcal.calibrate.glass import MAX_PLAUSIBLE_MM
+from rotstar_mrcal.calibrate.glass import MAX_PLAUSIBLE_MM, MIN_SIGMAS
 from rotstar_mrcal.cli.common import (
     HelpFormatter, atomic_write, exit_status_help, make_folder, number_arg, run, say,
 )
@@ -106,7 +106,7 @@ def parse_args(argv=None):
     p.add_argument("--glass", type=number_arg(float, 0, 5), default=None, metavar="MM",
                    help="the screen's cover glass over its pixels, mm (0-5): the calibration is corrected for it "
                         "(0: no correction); default: its thickness estimated from the data, with its uncertainty, "
-                        "and applied when it is a plausible glass (over 0 by 2 sigma, at most "
+                        f"and applied when it is a plausible glass (over 0 by {MIN_SIGMAS:g} sigma, at most "
                         f"{MAX_PLAUSIBLE_MM:g} mm)")
     p.add_argument("--glass-index", type=number_arg(float, 1), default=DEFAULT_INDEX, metavar="N",
                    help=f"refractive index of the cover glass (>= 1; default {DEFAULT_INDEX})")

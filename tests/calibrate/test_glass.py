@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rotstar_mrcal import dataset as ds
-from rotstar_mrcal.calibrate.glass import correct_glass, observation_shift
+from rotstar_mrcal.calibrate.glass import MIN_SIGMAS, correct_glass, observation_shift
 from rotstar_mrcal.cli.calibrate import main as calibrate_main
 from rotstar_mrcal.evaluate.truth import truth_error
 from rotstar_mrcal.optics.refraction import Glass, apparent_points
@@ -88,7 +88,7 @@ def test_a_glass_is_estimated_and_taken_out(glass1):
 def test_no_glass_comes_out_as_none_and_the_model_unchanged():
     m = solved(0.0)
     g = correct_glass(m)
-    assert not g.applied and abs(g.thickness_mm) < 2 * g.sigma_mm and "no glass" in g.reason
+    assert not g.applied and abs(g.thickness_mm) < MIN_SIGMAS * g.sigma_mm and "no glass" in g.reason
     assert g.model is m
 
 
