@@ -9,6 +9,7 @@ SYNOPSIS
     g.thickness_mm, g.sigma_mm, g.applied, g.reason
     g.model                                     # the re-solved model (the input model when not applied)
     correct_glass(model, thickness_mm=0.7)      # a thickness the user knows
+    corrected_boards(g.inputs)                  # its corrected corners, for a corners.vnl (rotstar-glass)
 
 What the glass does (optics.refraction, doc/simulator.md): the light of an
 emitting point P reaches the camera as if from A, a point of the board's
@@ -279,6 +280,23 @@ def halves_disagree(halves: list | None) -> bool:
 def _rms(oi: dict) -> float:
     c, n = board_cost(oi)
     return float(np.sqrt(2 * c / n)) if n else float("nan")
+
+
+def corrected_boards(oi: dict) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """[(image path, (ny, nx, 2) corners, (ny, nx) weights)] of a problem's board observations, as it holds them
+
+    For a re-solved problem (GlassResult.inputs): the corrected corners, to
+    write as a corners.vnl (vnl.write_corners) for a second mrcal run. A
+    corner mrcal did not use (missing, or an outlier) is NaN with weight 0.
+    """
+    paths = oi.get("imagepaths")
+    obs = oi["observations_board"]
+    if paths is None or len(paths) != len(obs):
+        raise ValueError("the model's optimization_inputs name no image per board (mrcal-calibrate-cameras "
+                         "writes them): cannot write a corners file")
+    used = obs[..., 2] > 0
+    return [(str(p), np.where(u[..., None], o[..., :2], np.nan), np.where(u, o[..., 2], 0.0))
+            for p, o, u in zip(paths, obs, used)]
 
 
 def corrected_model(model: mrcal.cameramodel, oi: dict, icam: int = 0) -> mrcal.cameramodel:
