@@ -190,6 +190,8 @@ class GlassResult:
         d = {k: (None if isinstance(v, float) and not np.isfinite(v) else v)  # JSON has no NaN
              for k, v in dataclasses.asdict(self).items() if k not in ("model", "inputs")}
         d["costs"] = {f"{k:.4g}": v for k, v in sorted(self.costs.items())}
+        if self.halves is not None:
+            d["halves"] = [[v if np.isfinite(v) else None for v in h] for h in self.halves]
         return d
 
     def line(self) -> str:

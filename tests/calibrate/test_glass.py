@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rotstar_mrcal import dataset as ds
-from rotstar_mrcal.calibrate.glass import MIN_SIGMAS, correct_glass, observation_shift
+from rotstar_mrcal.calibrate.glass import MIN_SIGMAS, GlassResult, correct_glass, observation_shift
 from rotstar_mrcal.cli.calibrate import main as calibrate_main
 from rotstar_mrcal.cli.glass import main as glass_main
 from rotstar_mrcal.evaluate.truth import truth_error
@@ -227,3 +227,11 @@ def test_rotstar_glass_without_glass_or_a_model(tmp_path, capsys):
     assert "nothing written" in capsys.readouterr().err
     assert glass_main([str(tmp_path / "none.cameramodel"), "-o", out]) == 2
     assert capsys.readouterr().err.strip().startswith("rotstar-glass: ") and not os.path.exists(out)
+
+
+def test_the_json_has_no_nan():
+    g = GlassResult(float("nan"), float("nan"), 1.5, False, False, "the fit's cost has no minimum", 0.01, 0.01,
+                    {0.0: 2.0, 1.0: 1.0}, [[float("nan"), 0.1], [0.5, 0.1]])
+    d = json.loads(json.dumps(g.to_json(), allow_nan=False))
+    assert d["thickness_mm"] is None and d["halves"] == [[None, 0.1], [0.5, 0.1]] and d["costs"] == {"0": 2.0, "1": 1.0}
+    assert g.line().startswith("cover glass (index 1.5): no estimate; not applied: ")
