@@ -6,8 +6,9 @@ import importlib.util
 import os
 
 import numpy as np
+import pytest
 
-from rotstar_lab.benchmark.glass import observed_corners, run_one, table
+from rotstar_lab.benchmark.glass import observed_corners, rig_row, rig_table, run_one, table
 from rotstar_mrcal.optics.refraction import Glass
 from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.simulate.camera import preset_model
@@ -46,3 +47,15 @@ def test_one_row_and_the_verdict(tmp_path):
     assert script.failures([same_free, row]) == []
     assert script.failures([same_free, dict(row, estimate_mm=1.5)])  # 0.5 mm off, 10 sigma
     assert script.failures([same_free, dict(row, glass_mm=0.0, pupil_mm=2.0)])  # a moving pupil's estimate applied
+
+
+@pytest.mark.slow
+def test_the_stereo_pair_row():
+    """(5-12 s) the D435 pair through 1 mm: one estimate, camera 1's pose put back"""
+    row = rig_row(10, 1.0, seed=1)
+    assert row["applied"] and abs(row["estimate_mm"] - 1.0) < max(0.1, 2 * row["sigma_mm"])
+    p, c = row["plain"], row["corrected"]
+    assert c["centre_mm"] < p["centre_mm"] / 3 and c["rotation_deg"] < p["rotation_deg"] / 3
+    assert "| 10 | 1 mm |" in rig_table([row])
+    assert bench_script().rig_failures([row]) == []
+    assert bench_script().rig_failures([dict(row, applied=False)])
