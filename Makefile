@@ -32,7 +32,7 @@ ifeq ($(UV),)
 UV := $(CURDIR)/.tools/bin/uv
 endif
 
-.PHONY: help setup test test-slow demo stereo bench calib-bench coverage-bench pip-check clean check-python system-deps python
+.PHONY: help setup test test-slow demo stereo bench calib-bench coverage-bench glass-bench pip-check clean check-python system-deps python
 
 help:
 	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
@@ -42,6 +42,7 @@ help:
 	@echo "make bench  - accuracy and speed against OpenCV and mrgingham, partial views against ChArUco, each method's failure modes, then calib-bench and coverage-bench"
 	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses)"
 	@echo "make coverage-bench - mrcal's uncertainty with and without boards hanging over the imager's edges"
+	@echo "make glass-bench - a screen's cover glass (0-1.5 mm): plain calibration vs rotstar-calibrate's correction (20/40 poses)"
 	@echo "make pip-check   - install with plain pip (scripts/pip_install.sh) into a fresh venv and check it"
 
 python: check-python  ## the Python >= 3.12 the set-up uses (the plain-pip path of README.md uses it too)
@@ -104,8 +105,12 @@ calib-bench: setup
 coverage-bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/coverage_bench.py --work coverage-bench-out --doc
 
+# writes its table into doc/simulator.md (between the glass-bench markers); about 1.5 min on 2 cores
+glass-bench: setup
+	$(RUN) $(VENV_BIN)/python scripts/glass_bench.py --work glass-bench-out --doc
+
 pip-check: check-python
 	PYTHON=$(PYTHON) $(VENV_BIN)/python -m pytest -q -s -m slow tests/cli/test_pip_install.py
 
 clean:
-	rm -rf .venv .tools $(DEMO_DIR) $(STEREO_DIR) .pytest_cache calib-bench-out coverage-bench-out
+	rm -rf .venv .tools $(DEMO_DIR) $(STEREO_DIR) .pytest_cache calib-bench-out coverage-bench-out glass-bench-out

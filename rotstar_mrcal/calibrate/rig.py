@@ -54,6 +54,8 @@ import numpy as np
 from rotstar_mrcal import dataset
 from rotstar_mrcal.atomic import atomic_path
 from rotstar_mrcal.calibrate.focal import focal_estimates
+from rotstar_mrcal.calibrate.glass import correct_glass, glass_line
+from rotstar_mrcal.optics.refraction import DEFAULT_INDEX
 from rotstar_mrcal.vnl import CornersFileError, mrcal_keeps, open_corners, read_corners
 from rotstar_mrcal.calibrate.checks import (
     MAX_DROP_SEARCH, MAX_OUTLIER_FRACTION, MIN_BOARDS, MOSTLY_OUTLIERS, far_boards, fit_failures, misordered_boards,
@@ -217,6 +219,7 @@ class RigCalibration:
     kept: bool
     corners: str
     dropped: dict = dataclasses.field(default_factory=dict)  # pose -> why it was left out
+    glass: dict | None = None  # calibrate.glass.GlassResult.to_json()
 
     FORMAT = "rotstar-calibrate-rig/1"
 
@@ -233,7 +236,7 @@ class RigCalibration:
         return {"format": self.FORMAT, "ok": self.ok, "models": {f"camera-{k}": v for k, v in self.models.items()},
                 "lensmodel": self.lensmodel, "command": self.command, "failures": self.failures, "kept": self.kept,
                 "corners": self.corners, "cameras": {f"camera-{k}": v for k, v in self.stats.items()},
-                "dropped": self.dropped}
+                "dropped": self.dropped, "glass": self.glass}
 
     def summary_lines(self) -> list[str]:
         out = [f"dropped {k}: {v}" for k, v in self.dropped.items()]
@@ -245,6 +248,8 @@ class RigCalibration:
             out.append(f"camera-{k}: {s['boards']} boards, {s['corners']} corners, {s['outliers']} outliers; fit RMS "
                        f"{s['rms_px']:.5f} px (2-D), worst {s['worst_px']:.4f} px; fx {s['focal_px'][0]:.2f} "
                        f"fy {s['focal_px'][1]:.2f}; {where}")
+        if self.glass:
+            out.append(glass_line(self.glass))
         return out
 
 
@@ -279,7 +284,8 @@ def without(rs: RigCornerSet, files) -> RigCornerSet:
 
 
 def calibrate_rig(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: float | None = None, keep: bool = False,
-                  in_process: bool = False, log=None) -> RigCalibration:
+                  in_process: bool = False, log=None, glass_mm: float | None = None,
+                  glass_index: float = DEFAULT_INDEX) -> RigCalibration:
     """Calibrate every camera of a rig at once; write outdir/camera-K.cameramodel if the checks pass (or keep)
 
     Raises InputError before mrcal runs (check_rig), CalibrationError when
@@ -289,7 +295,8 @@ def calibrate_rig(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: floa
     it (boards far off the rest, or the one pose without which the fit is
     plausible) is left out and the rig solved again; each is named in log
     and RigCalibration.dropped. A fit that stays implausible is not written,
-    even with keep.
+    even with keep. The screen's cover glass: as solve.calibrate (glass_mm
+    None: estimated; 0: no correction), one thickness for the whole rig.
     """
     log = log or (lambda s: None)
     if spec.strip().lower() == "splined":
@@ -331,14 +338,36 @@ def calibrate_rig(rs: RigCornerSet, outdir: str, spec: str = "auto", focal: floa
         dropped.update({f: why for f in files})
         rs = without(rs, files)
     failures = implausible + rig_failures(stats)
-    written = {}
+    written, glass = {}, None
     if not failures or (keep and not implausible):
+        sources, glass = _rig_glass(work, outdir, rs.cameras, glass_mm, glass_index, log)
         for k in rs.cameras:
             with atomic_path(finals[k]) as tmp:
-                shutil.copyfile(os.path.join(work, f"camera-{k}.cameramodel"), tmp)
+                shutil.copyfile(sources[k], tmp)
             written[k] = finals[k]
     return RigCalibration(written, lensmodel, cmd, stats, failures, bool(failures) and bool(written), rs.vnl,
-                          {_dropped_name(f): v for f, v in dropped.items()})
+                          {_dropped_name(f): v for f, v in dropped.items()}, glass)
+
+
+def _rig_glass(work: str, outdir: str, cameras, glass_mm, index: float, log) -> tuple[dict, dict | None]:
+    """({camera: model file to write}, the glass's JSON): the solve's models, or them re-solved for a cover glass"""
+    solved = {k: os.path.join(work, f"camera-{k}.cameramodel") for k in cameras}
+    if glass_mm == 0:
+        return solved, None
+    log("cover glass: " + ("estimating its thickness from the fit" if glass_mm is None else
+                           f"correcting for {glass_mm:g} mm (index {index:g})"))
+    models = [mrcal.cameramodel(solved[k]) for k in sorted(cameras)]
+    g = correct_glass(models[0], glass_mm, index)
+    d = g.to_json()
+    if not g.applied:
+        return solved, d
+    out = {}
+    for k, m in zip(sorted(cameras), g.models(models)):
+        out[k] = os.path.join(outdir, "candidates", "glass", f"camera-{k}.cameramodel")
+        os.makedirs(os.path.dirname(out[k]), exist_ok=True)
+        m.write(out[k])
+    d["models"] = out
+    return out, d
 
 
 def _dropped_name(f: str) -> str:

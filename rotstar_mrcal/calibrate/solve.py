@@ -72,6 +72,8 @@ from rotstar_mrcal.calibrate.checks import (
 )
 from rotstar_mrcal.calibrate.cornerset import pose_name
 from rotstar_mrcal.calibrate.focal import focal_seed
+from rotstar_mrcal.calibrate.glass import correct_glass, glass_line
+from rotstar_mrcal.optics.refraction import DEFAULT_INDEX
 from rotstar_mrcal.evaluate.crossval import cross_validate
 from rotstar_mrcal.evaluate.uncertainty import projection_uncertainty
 
@@ -368,6 +370,7 @@ class Calibration:
     focal_seed: float
     corners: str  # the corners.vnl
     dropped: dict = dataclasses.field(default_factory=dict)  # pose -> why its board was left out
+    glass: dict | None = None  # calibrate.glass.GlassResult.to_json(): the cover glass estimated / applied
 
 
     FORMAT = "rotstar-calibrate/1"
@@ -393,7 +396,7 @@ class Calibration:
         return {"format": self.FORMAT, "ok": self.ok, "model": self.model_path, "chosen": self.chosen,
                 "reason": self.reason, "failures": self.failures, "kept": self.kept,
                 "focal_seed_px": self.focal_seed, "corners": self.corners, "comparison": self.comparison,
-                "dropped": self.dropped,
+                "dropped": self.dropped, "glass": self.glass,
                 "candidates": [c.to_json() for c in self.candidates]}
 
     def summary_lines(self) -> list[str]:
@@ -408,6 +411,8 @@ class Calibration:
             out.append(f"lean vs splined: projection diff {k['diff_median_px']:.4f} px median (p95 "
                        f"{k['diff_p95_px']:.3f}), uncertainty uA+uB {k['unc_median_px']:.4f} px, ratio "
                        f"{k['ratio_median']:.2f} ({k['verdict']})")
+        if self.glass:
+            out.append(glass_line(self.glass))
         out.append(f"model: {self.reason}")
         return out
 
@@ -416,7 +421,8 @@ class Calibration:
 # the calibration: lean, then splined when supported; reseeded; implausible fits searched
 # ---------------------------------------------------------------------------
 def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, knots_x: int = DEFAULT_KNOTS_X,
-              keep: bool = False, force: bool = False, in_process: bool = False, log=None) -> Calibration:
+              keep: bool = False, force: bool = False, in_process: bool = False, log=None,
+              glass_mm: float | None = None, glass_index: float = DEFAULT_INDEX) -> Calibration:
     """Calibrate a corner set; write outdir/camera-0.cameramodel if its checks pass (or keep)
 
     spec: 'auto' (lean, then splined when supported; module doc), or one
@@ -430,6 +436,11 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
     an implausible fit (fit_failures) after it; each is named in log and in
     Calibration.dropped. A fit that stays implausible is not written, even
     with keep.
+
+    The screen's cover glass (calibrate.glass): glass_mm None estimates its
+    thickness from the chosen fit and writes the model re-solved for it
+    when the estimate is a plausible glass; a number applies that thickness
+    (0: no correction). Calibration.glass says what was found and done.
     """
     log = log or (lambda s: None)
     final = os.path.join(outdir, "camera-0.cameramodel")
@@ -462,20 +473,36 @@ def calibrate(cs, outdir: str, spec: str = "auto", focal: float | None = None, k
             break
         cs = _drop(cs, culprits, dropped, log)
         vnl = mrcal_corners(cs.vnl, os.path.join(outdir, "candidates"), drop=set(dropped))
-    written = None
+    written, glass = None, None
     if not failures or (keep and not implausible):
         os.makedirs(outdir, exist_ok=True)
-        _atomic_copy(chosen.path, final)
+        source, glass = _glass(chosen, outdir, glass_mm, glass_index, log)
+        _atomic_copy(source, final)
         written = final
     return Calibration(written, chosen.name, reason, failures, bool(failures) and bool(written), cands, comparison,
-                       f, cs.vnl, {pose_name(k): v for k, v in dropped.items()})
+                       f, cs.vnl, {pose_name(k): v for k, v in dropped.items()}, glass)
+
+
+def _glass(chosen: Candidate, outdir: str, glass_mm: float | None, index: float, log) -> tuple[str, dict | None]:
+    """(the model file to write, the glass's JSON): chosen's model, or it re-solved for a cover glass"""
+    if glass_mm == 0:
+        return chosen.path, None
+    log("cover glass: " + ("estimating its thickness from the fit" if glass_mm is None else
+                           f"correcting for {glass_mm:g} mm (index {index:g})"))
+    g = correct_glass(mrcal.cameramodel(chosen.path), glass_mm, index)
+    d = g.to_json()
+    if g.applied:
+        d["model"] = os.path.join(outdir, "candidates", "glass", "camera-0.cameramodel")
+        os.makedirs(os.path.dirname(d["model"]), exist_ok=True)
+        g.model.write(d["model"])
+    return d.get("model", chosen.path), d
 
 
 def _remove_stale(outdir: str) -> None:
     """outdir's model and its candidates' models from an earlier run: a failed run leaves none behind"""
     names = ("lean", "splined", "model", "lean-seeded", "splined-seeded", "model-seeded")
     for stale in [os.path.join(outdir, "camera-0.cameramodel")] + [
-            os.path.join(outdir, "candidates", n, "camera-0.cameramodel") for n in names]:
+            os.path.join(outdir, "candidates", n, "camera-0.cameramodel") for n in names + ("glass",)]:
         if os.path.exists(stale):
             os.remove(stale)
 

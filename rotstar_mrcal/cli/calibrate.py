@@ -11,7 +11,11 @@ import sys
 from rotstar_mrcal import dataset
 from rotstar_mrcal.calibrate import checks, rig, solve as cal
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
-from rotstar_mrcal.cli.common import HelpFormatter, atomic_write, exit_status_help, make_folder, run, say
+from rotstar_mrcal.calibrate.glass import MAX_PLAUSIBLE_MM, MIN_SIGMAS
+from rotstar_mrcal.cli.common import (
+    HelpFormatter, atomic_write, exit_status_help, make_folder, number_arg, run, say,
+)
+from rotstar_mrcal.optics.refraction import DEFAULT_INDEX
 from rotstar_mrcal.detect.run import detect_dataset
 from rotstar_mrcal.peers.registry import REFINERS
 from rotstar_mrcal.vnl import write_corners
@@ -54,6 +58,17 @@ intrinsics and extrinsics (camera 0 at the origin); the report gives each
 camera's residuals, outliers and where it is relative to camera 0. A camera
 with more than {100 * checks.MAX_OUTLIER_FRACTION:.0f}% outliers, or a board mrcal mostly rejects (labelled
 differently than in the other cameras), fails the checks.
+
+A screen's cover glass (0.5-1.5 mm over the pixels of tablets and phones)
+bends every ray by an amount that changes with the viewing angle, and a plain
+calibration puts that into the lens model. After the fit, the glass's
+thickness is estimated from the data (each corner moved to where the
+unrefracted pixel would have been seen, the fit solved again, the thickness
+that fits best found with its uncertainty) and the model re-solved for it is
+written when the estimate is a plausible glass; an estimate beyond
+{MAX_PLAUSIBLE_MM:g} mm is reported as another pose-dependent error and not applied.
+--glass MM gives the thickness (0: no correction); a rig gets one thickness
+for all its cameras.
 """
 
 EPILOG = """\
@@ -88,6 +103,13 @@ def parse_args(argv=None):
     p.add_argument("--refine", choices=("symmetric", "opencv", "saddle"), default="symmetric",
                    help="refinement for the detection (rotstar-detect --refine; default symmetric)")
     p.add_argument("--jobs", "-j", type=int, default=1, help="poses detected in parallel (default 1)")
+    p.add_argument("--glass", type=number_arg(float, 0, 5), default=None, metavar="MM",
+                   help="the screen's cover glass over its pixels, mm (0-5): the calibration is corrected for it "
+                        "(0: no correction); default: its thickness estimated from the data, with its uncertainty, "
+                        f"and applied when it is a plausible glass (over 0 by {MIN_SIGMAS:g} sigma, at most "
+                        f"{MAX_PLAUSIBLE_MM:g} mm)")
+    p.add_argument("--glass-index", type=number_arg(float, 1), default=DEFAULT_INDEX, metavar="N",
+                   help=f"refractive index of the cover glass (>= 1; default {DEFAULT_INDEX})")
     p.add_argument("--keep", action="store_true", help="write the model even when its checks fail (exit 0)")
     p.add_argument("--force", action="store_true",
                    help="calibrate inputs the checks refuse (a splined model on few boards, a disputed focal seed)")
@@ -136,11 +158,13 @@ def calibrate(a, vnl: str, layout):
         rs = rig.load_rig_corners(vnl, a.seq, a.imagersize)
         if a.dry_run:
             return say("$ " + cal.command_line(rig.first_argv(rs, a.outdir, a.lensmodel, a.focal)))
-        return rig.calibrate_rig(rs, a.outdir, a.lensmodel, a.focal, keep=a.keep, log=log)
+        return rig.calibrate_rig(rs, a.outdir, a.lensmodel, a.focal, keep=a.keep, log=log, glass_mm=a.glass,
+                                 glass_index=a.glass_index)
     cs = load_corner_set(vnl, imagersize=a.imagersize, truth=False, layout=layout)
     if a.dry_run:
         return say("$ " + cal.command_line(cal.first_argv(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, a.force)))
-    return cal.calibrate(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, keep=a.keep, force=a.force, log=log)
+    return cal.calibrate(cs, a.outdir, a.lensmodel, a.focal, a.knots_x, keep=a.keep, force=a.force, log=log,
+                         glass_mm=a.glass, glass_index=a.glass_index)
 
 
 def main(argv=None) -> int:

@@ -38,6 +38,7 @@ from rotstar_mrcal.simulate.camera import PRESETS, preset_model
 from rotstar_mrcal.simulate.dataset import Settings, write_dataset
 from rotstar_mrcal.simulate.poses import default_distance_range, random_poses
 from rotstar_mrcal.optics.wavefront import TERMS, Seidel
+from rotstar_mrcal.optics.refraction import DEFAULT_INDEX
 from rotstar_mrcal.optics.psf import LensPSF
 from rotstar_mrcal.simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_dataset
 from rotstar_mrcal.simulate.screen import exact_frames, png_frames, shown_light
@@ -59,6 +60,7 @@ of the sequence, pose after pose), to try rotstar-segment and rotstar-capture
 EPILOG = """\
 examples:
   rotstar-simulate --out seq/ --poses 24 --jobs 2
+  rotstar-simulate --out seq-glass/ --glass 0.7          # a tablet's cover glass over the pixels
   rotstar-simulate --rig d435 --rgb --out stereo/
   rotstar-pattern --out pattern/
   rotstar-simulate --recording rec.npy --pattern pattern/ --camera pinhole-small --hold 18 --poses 2
@@ -139,6 +141,12 @@ def _scene_arguments(p) -> None:
         help="show the pattern PNGs of --pattern DIR (8-bit, decoded with the display gamma) "
         "instead of the exact linear frames",
     )
+    p.add_argument("--glass", type=number_arg(float, 0, 5), default=0.0, metavar="MM",
+                   help="a cover glass this thick (mm, 0-5) over the emitting layer: every camera ray is refracted at "
+                        "its surface on the way to the pixels (laminated tablets and phones: 0.5-1.5 mm); the truth "
+                        "stays the emitting layer (default 0: none)")
+    p.add_argument("--glass-index", type=number_arg(float, 1), default=DEFAULT_INDEX, metavar="N",
+                   help=f"refractive index of the --glass (>= 1; default {DEFAULT_INDEX})")
     p.add_argument("--camera", default="d435", metavar="NAME|FILE",
                    help=f"camera preset ({', '.join(PRESETS)}) or a .cameramodel file")
     p.add_argument("--rig", choices=list(RIGS), default=None,
@@ -234,9 +242,9 @@ def _check_recording(p, args) -> None:
         p.error("give --out SEQ (a dataset) or --recording REC.npy (a recording of the player), not both" if
                 args.out else "--out SEQ is needed (or --recording REC.npy)")
     if args.recording and (args.rig or args.display_offsets or args.screen_png or args.force or args.shot or args.black
-                           or args.value_bits):
+                           or args.value_bits or args.glass):
         p.error("--recording takes a single camera and the sensor's gain, noise and bits; drop --rig, "
-                "--display-offsets, --screen-png, --shot, --black, --value-bits and --force")
+                "--display-offsets, --screen-png, --shot, --black, --value-bits, --glass and --force")
     if args.recording and not args.pattern:
         p.error("--recording needs --pattern DIR: the pattern folder player.html shows (rotstar-pattern --out DIR)")
     if args.recording and not args.recording.endswith(".npy"):
@@ -341,7 +349,7 @@ def main(argv=None) -> int:
 def settings_of(args) -> Settings:
     return Settings(supersample=args.supersample, blur_px=args.blur, sampling=args.sampling, room=args.room,
                     gain=args.gain, black=args.black, noise=args.noise, shot=args.shot, bits=args.bits,
-                    value_bits=args.value_bits, seed=args.seed)
+                    value_bits=args.value_bits, seed=args.seed, glass_mm=args.glass, glass_index=args.glass_index)
 
 
 def _rig(args, layout, frames, cams, distance, say, gammas: dict) -> int:

@@ -55,6 +55,7 @@ import mrcal
 import numpy as np
 
 from rotstar_mrcal import dataset as ds
+from rotstar_mrcal.optics.refraction import DEFAULT_INDEX, Glass
 from rotstar_mrcal.parallel import process_map
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.simulate.camera import RayGrid, camera_rays, remember_rays
@@ -81,6 +82,13 @@ class Settings:
     bits: int = 16  # 8 or 16-bit PNG
     value_bits: int | None = None  # 10 or 12: that many bits scaled into 16
     seed: int = 0
+    glass_mm: float = 0.0  # cover glass over the emitting layer, mm (0: none); see irradiance.py
+    glass_index: float = DEFAULT_INDEX  # its refractive index
+
+    @property
+    def glass(self) -> Glass | None:
+        """The cover glass the screen is seen through (None without)"""
+        return Glass.mm(self.glass_mm, self.glass_index) if self.glass_mm else None
 
 
 @dataclasses.dataclass
@@ -138,6 +146,7 @@ def render_pose(
         psf=settings.blur_px if psf is None else psf,
         sampling=settings.sampling,
         rays=rays,
+        glass=settings.glass,
     )
     return expose(
         E,

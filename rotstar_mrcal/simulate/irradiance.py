@@ -43,6 +43,13 @@ PSF radius; the rest of the image is the room level.
 
 rt_cam_board may be one pose (6,) or one pose per frame (nframes, 6); frames
 that share a pose are rendered together.
+
+glass (optics.refraction.Glass): a cover glass over the emitting layer. Each
+sub-pixel ray is then refracted exactly at the glass surface (the plane
+thickness_m in front of the board, on the camera's side) and meets the
+emitting layer where the bent ray does; the board (and so the truth) stays
+the emitting layer. Without glass (or thickness 0) the straight-ray code
+runs unchanged.
 """
 
 from __future__ import annotations
@@ -54,6 +61,7 @@ import mrcal
 import numpy as np
 import scipy.sparse
 
+from rotstar_mrcal.optics.refraction import Glass, emitting_hits
 from rotstar_mrcal.simulate.camera import RayGrid, camera_rays, subpixel_rays
 from rotstar_mrcal.simulate.blur import as_psf, psf_radius
 from rotstar_mrcal.simulate.screen import Screen
@@ -65,11 +73,13 @@ CHUNK = 1 << 17
 """Sub-pixels per sparse-matrix block"""
 
 
-def board_hits(d_cam: np.ndarray, rt_cam_board: np.ndarray, layout) -> tuple[np.ndarray, np.ndarray]:
+def board_hits(d_cam: np.ndarray, rt_cam_board: np.ndarray, layout,
+               glass: Glass | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Screen coordinates (u, v) where camera rays d_cam (..., 3) meet the board plane
 
     NaN where the ray misses the plane, runs away from it, or the camera is
-    behind the screen (on the +z side of the board).
+    behind the screen (on the +z side of the board). With glass, the rays
+    are refracted at its surface on their way (optics.refraction).
 
     SYNOPSIS
 
@@ -81,6 +91,10 @@ def board_hits(d_cam: np.ndarray, rt_cam_board: np.ndarray, layout) -> tuple[np.
     """
     R = mrcal.R_from_r(rt_cam_board[:3])
     c = -R.T @ rt_cam_board[3:]  # camera centre, board frame
+    if glass is not None and not glass.none:
+        xy = emitting_hits(c, d_cam @ R, glass)  # metres on the emitting layer
+        return (xy[..., 0] / layout.pixel_pitch_m + layout.origin[0],
+                xy[..., 1] / layout.pixel_pitch_m + layout.origin[1])
     if not c[2] < 0:
         nan = np.full(np.shape(d_cam)[:-1], np.nan)
         return nan, nan.copy()
@@ -93,13 +107,13 @@ def board_hits(d_cam: np.ndarray, rt_cam_board: np.ndarray, layout) -> tuple[np.
     return u, v
 
 
-def screen_roi(grid: RayGrid, rt_cam_board, layout, margin_px: float):
+def screen_roi(grid: RayGrid, rt_cam_board, layout, margin_px: float, glass: Glass | None = None):
     """(x0, y0, x1, y1) camera pixels to trace, or None if the screen is not seen
 
     The pixels whose centre ray lands on the screen, grown by 1 + margin_px
     and clipped to what the ray grid can interpolate.
     """
-    u, v = board_hits(grid.rays, rt_cam_board, layout)
+    u, v = board_hits(grid.rays, rt_cam_board, layout, glass)
     on = (u >= 0) & (u <= layout.screen_width) & (v >= 0) & (v <= layout.screen_height)
     rows = np.flatnonzero(on.any(axis=1))
     cols = np.flatnonzero(on.any(axis=0))
@@ -211,12 +225,14 @@ def render_irradiance(
     psf=1.0,
     sampling: str = "area",
     rays: RayGrid | None = None,
+    glass: Glass | None = None,
 ) -> np.ndarray:
     """Camera images of every screen frame, (nframes, H, W) float64 irradiance
 
     Irradiance is in screen luminance units (white screen seen head-on = 1).
     psf: see optics.as_psf (default: Gaussian of sigma 1 camera pixel). rays:
     the camera's RayGrid (default: camera.camera_rays(model), cached).
+    glass: a cover glass over the emitting layer (module doc; default none).
     """
     s = int(supersample)
     if s < 1:
@@ -227,11 +243,11 @@ def render_irradiance(
     op = as_psf(psf, s)
     out = np.full((screen.nframes, H, W), screen.room)
     for rt_g, frames in _pose_groups(rt, screen.nframes):
-        roi = screen_roi(grid, rt_g, screen.layout, psf_radius(op, s))
+        roi = screen_roi(grid, rt_g, screen.layout, psf_radius(op, s), glass)
         if roi is None:
             continue
         x0, y0, x1, y1 = roi
-        u, v = board_hits(subpixel_rays(grid, x0, y0, x1, y1, s), rt_g, screen.layout)
+        u, v = board_hits(subpixel_rays(grid, x0, y0, x1, y1, s), rt_g, screen.layout, glass)
         sub = sample_screen(screen, u, v, frames, sampling)
         px = block_average(op(sub, (x0, y0), s), s)
         cx0, cy0, cx1, cy1 = max(x0, 0), max(y0, 0), min(x1, W), min(y1, H)

@@ -125,6 +125,10 @@ def test_calibrate_recovers_the_baseline(rig_seq, detected, tmp_path, capsys):
     assert calibrate_cli.main([rig_seq, "--corners", vnl, "--outdir", out]) == 0
     err = capsys.readouterr().err
     assert "camera-1:" in err and "mm from camera-0" in err
+    assert "cover glass (index 1.5): " in err  # estimated for the whole rig (none here: 8 poses, no glass)
+    with open(os.path.join(out, "calibration.json")) as f:
+        glass = json.load(f)["glass"]
+    assert glass["given"] is False and not glass["applied"] and "no glass" in glass["reason"]
     t = load_rig_truth(rig_seq)
     for k in (0, 1):
         m = mrcal.cameramodel(os.path.join(out, f"camera-{k}.cameramodel"))
