@@ -189,7 +189,7 @@ def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frame
              "dropped": int(np.sum(np.maximum(np.diff(seqnums) - 1, 0)))}
     ds.log.append(entry)
     try:
-        seg = segment(frames, pattern["frames"], layout, full_scale, so)
+        seg = segment(frames, pattern["frames"], layout, full_scale, so, times=seqnums)
         ds.tau = seg.tau
     except SegmentError as e:
         d, _ = difference_signal(frames, full_scale, so.step, screen_pixels(frames, full_scale, so.step))

@@ -222,7 +222,7 @@ def split(a, cams: list, pattern: dict, layout, names: list[str]):
                              options_from(a), a.reference, names)
         else:
             rs = RigSegmentation([segment(cams[0].frames, pattern["frames"], layout, cams[0].full_scale,
-                                          options_from(a))], 0, [])
+                                          options_from(a), times=cams[0].sequence)], 0, [])
     except SegmentError as e:
         fail(str(e) if names else f"{a.recording[0]}: {e}", EXIT_FAILED)
     except CaptureError as e:

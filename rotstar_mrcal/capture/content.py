@@ -1,0 +1,361 @@
+"""Find every displayed frame by its content, in any window of the player's loop
+
+SYNOPSIS
+
+    from rotstar_mrcal.capture.content import segment_content
+    seg = segment_content(frames, pattern["frames"], layout, full_scale, opts, times=seq / fps)
+    seg.images["identity_03.png"]      # the mean of every clean camera frame of that displayed frame
+    seg.used["identity_03.png"]        # which camera frames those were
+
+What segment.segment does with two start markers and a whole loop between
+them, this does with any stretch of the recording that holds every frame of
+pattern.json at least once (start anywhere in the loop, wrap around, one
+pass or several), with holds as short as two camera frames:
+
+1. every camera frame, area-downsampled over the screen's pixels
+   (motion.screen_pixels), is compared with the one before it after fitting
+   a gain and an offset (a PWM-dimmed backlight changes the brightness from
+   one camera frame to the next, not the picture): the two show the same
+   displayed frame when almost no pixel differs by more than k robust
+   sigmas of the sensor noise (the noise from the recording itself: the
+   quiet quartile of all the frame pairs). A camera frame that blends two
+   displayed frames (its exposure straddles a refresh, or the LCD is still
+   switching) differs from both of its neighbours over every pixel the two
+   displayed frames differ in, so it agrees with neither;
+2. runs: consecutive camera frames that agree. A run of two or more is a
+   displayed frame seen clean (two consecutive camera frames, 1 / fps
+   apart, cannot blend the same two displayed frames in the same
+   proportion). A lone camera frame is kept only when it agrees with the
+   runs of a displayed frame seen clean elsewhere in the recording;
+3. classes: runs that show the same displayed frame (their means agree as
+   in step 1, with the noise of the means) are one class; the runs of a
+   class, merged where consecutive, are its visits;
+4. which class is which loop entry: the visits in time order walk round the
+   loop. For every entry the first visit could be, the walk assigns each
+   next visit: a class seen before keeps its entry (and the time since the
+   last visit must allow it), a new class takes the entry whose place in
+   the loop the time since the last visit points to (the player's hold
+   times; by default estimated from the visits). A hypothesis that maps two
+   classes to one entry, or whose times contradict it, is dropped; of the
+   rest, the one whose class levels follow the levels pattern.json predicts
+   (pattern.loop.expected_levels: the black marker, the border band white
+   and black, the identity frames, the checkerboard) is used, and it must
+   be the only one that does (segment.check_order), or nothing is decided;
+5. motion: the image shift between the two halves of the longer runs and
+   between visits of the same class far apart, per camera frame; times the
+   frames spanned it must stay below max_motion px;
+6. every frame of pattern.json must have a class: a missing one raises
+   SegmentError naming it (and the time its place in the loop went by).
+
+The averages weight every clean camera frame equally.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from rotstar_mrcal.capture.motion import downsample, image_shift, screen_pixels
+from rotstar_mrcal.capture.segment_base import (
+    LoopVerdict, Options, Segmentation, SegmentError, Stretch, _mean, check_order,
+)
+from rotstar_mrcal.pattern.layout import Layout
+from rotstar_mrcal.pattern.loop import expected_levels, player_loop
+
+
+def frame_vectors(frames, full_scale: float, step: int, mask: np.ndarray | None) -> np.ndarray:
+    """(T, P) float32: every frame area-downsampled by step, over the mask, as a fraction of full scale"""
+    out = []
+    for t in range(len(frames)):
+        cur = downsample(frames[t], step)
+        out.append((cur[mask] if mask is not None else cur.ravel()) / np.float32(full_scale))
+    return np.stack(out)
+
+
+def gain_residual(x: np.ndarray, y: np.ndarray, max_gain: float = 1.25) -> np.ndarray:
+    """y - (g x + o): g (within [1 / max_gain, max_gain]) and o fitted, then again on the pixels that fit
+
+    The brightness of a PWM-dimmed screen changes by a few per cent from one
+    camera frame to the next; a gain far from 1 is a different picture (the
+    black start marker is not the checkerboard times 0).
+
+    SYNOPSIS
+
+        >>> x = np.linspace(0, 1, 100)
+        >>> float(np.abs(gain_residual(x, 0.97 * x + 0.01)).max()) < 1e-9
+        True
+        >>> y = 0.97 * x + 0.01; y[:10] += 0.5              # a tenth of the pixels changed
+        >>> r = gain_residual(x, y); bool(np.abs(r[10:]).max() < 1e-9 and np.all(r[:10] > 0.4))
+        True
+        >>> float(np.abs(gain_residual(x, 0 * x)).max()) > 0.3   # black is not a dim picture
+        True
+    """
+    x64, y64 = x.astype(np.float64), y.astype(np.float64)
+    keep = np.ones(len(x64), bool)
+    for _ in range(2):
+        xs, ys = x64[keep], y64[keep]
+        vx = float(np.var(xs))
+        g = float(np.cov(xs, ys, bias=True)[0, 1]) / vx if vx > 0 else 1.0
+        g = min(max(g, 1 / max_gain), max_gain)
+        o = float(np.median(ys - g * xs))
+        r = y64 - (g * x64 + o)
+        keep = np.abs(r) <= max(3 * robust_sigma(r), 1e-12)
+        if keep.sum() < 10:
+            break
+    return r
+
+
+def robust_sigma(r: np.ndarray) -> float:
+    """1.4826 MAD"""
+    return float(np.median(np.abs(r - np.median(r)))) * 1.4826
+
+
+def differing(x: np.ndarray, y: np.ndarray, sigma: float, k: float) -> float:
+    """Fraction of pixels where y differs from x, after a gain and an offset, by more than k sigma
+
+    sigma: of the difference of the two (for two single frames sqrt(2) times one frame's noise)
+    """
+    return float(np.mean(np.abs(gain_residual(x, y)) > k * sigma))
+
+
+@dataclasses.dataclass
+class Visit:
+    frames: list[int]  # camera frames averaged (clean, consecutive or nearly)
+    cls: int  # class: one displayed frame
+    entry: int = -1  # loop entry, once identified
+
+
+@dataclasses.dataclass
+class ContentRuns:
+    runs: list[list[int]]  # camera frames of each run (agreeing consecutive frames), time order
+    cls: list[int]  # class of each run (-1: a lone frame matching no class: not used)
+    n_classes: int
+    sigma: float  # the noise of one frame difference (fraction of full scale)
+    d: np.ndarray  # (T,) fraction of pixels differing from the previous frame (NaN for the first)
+
+
+def find_runs(X: np.ndarray, opts: Options) -> ContentRuns:
+    """Steps 1-3: agreeing consecutive frames, runs, and classes of runs (see the module doc)"""
+    T = len(X)
+    sig = [robust_sigma(gain_residual(X[t - 1], X[t])) for t in range(1, T)]
+    sigma = float(np.percentile(sig, 25)) if sig else 1.0
+    sigma = max(sigma, 1e-6)
+    d = np.r_[np.nan, [differing(X[t - 1], X[t], sigma, opts.content_k) for t in range(1, T)]]
+    runs, cur = [], [0]
+    for t in range(1, T + 1):
+        if t < T and d[t] <= opts.content_fraction:
+            cur.append(t)
+            continue
+        runs.append(cur)
+        cur = [t]
+    means = [X[r].mean(axis=0) for r in runs]
+    cls = [-1] * len(runs)
+    reps: list[tuple[np.ndarray, int]] = []  # class -> (mean of its first clean run, frames in it)
+
+    def match(i):
+        n = len(runs[i])
+        for c, (m, nm) in enumerate(reps):
+            s = sigma * math.sqrt((1 / n + 1 / nm) / 2)
+            if differing(m, means[i], s, opts.content_k) <= opts.content_fraction:
+                return c
+        return -1
+
+    for i in sorted(range(len(runs)), key=lambda i: -len(runs[i])):  # clean runs first, longest first
+        if len(runs[i]) >= 2:
+            c = match(i)
+            if c < 0:
+                reps.append((means[i], len(runs[i])))
+                c = len(reps) - 1
+            cls[i] = c
+        else:
+            cls[i] = match(i)  # a lone frame: only as a displayed frame seen clean elsewhere
+    return ContentRuns(runs, cls, len(reps), sigma, d)
+
+
+def visits_of(cr: ContentRuns) -> list[Visit]:
+    """The classified runs in time order, consecutive runs of one class merged"""
+    out: list[Visit] = []
+    for r, c in zip(cr.runs, cr.cls):
+        if c < 0:
+            continue
+        if out and out[-1].cls == c:
+            out[-1].frames.extend(r)
+        else:
+            out.append(Visit(list(r), c))
+    return out
+
+
+def entry_offsets(durations: np.ndarray) -> np.ndarray:
+    """(n + 1,) start time of every loop entry within one loop, and the loop's length last"""
+    return np.r_[0.0, np.cumsum(durations)]
+
+
+def step_time(durations: np.ndarray, a: int, b: int) -> float:
+    """Seconds from the middle of entry a to the middle of entry b, going forward round the loop (b == a: a loop)
+
+    >>> step_time(np.array([1.0, 2.0, 3.0]), 0, 2), step_time(np.array([1.0, 2.0, 3.0]), 2, 1)
+    (4.0, 3.5)
+    """
+    n = len(durations)
+    k = (b - a) % n or n
+    idx = [(a + j) % n for j in range(k + 1)]
+    return float(durations[idx[0]] / 2 + sum(durations[j] for j in idx[1:-1]) + durations[idx[-1]] / 2)
+
+
+def walk(visits: list[Visit], centres: np.ndarray, e0: int, durations: np.ndarray,
+         tol: float) -> tuple[dict[int, int], int]:
+    """({class: entry}, conflicts) when the first visit shows entry e0 (step 4 of the module doc)"""
+    n = len(durations)
+    owner: dict[int, int] = {}
+    cmap = {visits[0].cls: e0}
+    owner[e0] = visits[0].cls
+    conflicts = 0
+    prev = e0
+    for i in range(1, len(visits)):
+        el = centres[i] - centres[i - 1]
+        c = visits[i].cls
+        if c in cmap:
+            e = cmap[c]
+            if abs(step_time(durations, prev, e) - el) > tol * (durations[e] + durations[prev]) / 2:
+                conflicts += 1
+        else:
+            cand = [(abs(step_time(durations, prev, (prev + k) % n) - el), (prev + k) % n) for k in range(1, n + 1)]
+            err, e = min(cand)
+            if err > tol * (durations[e] + durations[prev]) / 2 or e in owner:
+                conflicts += 1
+                continue
+            cmap[c], owner[e] = e, c
+        prev = e
+    return cmap, conflicts
+
+
+def identify(visits: list[Visit], centres: np.ndarray, levels: np.ndarray, want: np.ndarray,
+             durations: np.ndarray, opts: Options) -> tuple[dict[int, int], float, str]:
+    """({class: entry}, correlation, '' or why nothing is decided): step 4 of the module doc"""
+    n = len(durations)
+    good = []
+    for e0 in range(n):
+        cmap, conflicts = walk(visits, centres, e0, durations, opts.content_timing)
+        if conflicts or len(cmap) < 2:
+            continue
+        cl = sorted(cmap, key=cmap.get)  # in the loop's order
+        corr, why = check_order(levels[cl], want[[cmap[c] for c in cl]], opts.min_correlation)
+        good.append((not why, corr, e0, cmap, why))
+    ok = [g for g in good if g[0]]
+    if not ok:
+        best = max(good, key=lambda g: g[1]) if good else None
+        return {}, (best[1] if best else math.nan), ("no assignment of the displayed frames to the loop's entries "
+                                                    "agrees with their times and levels" +
+                                                    (f" (best: {best[4]})" if best else ""))
+    if len({tuple(sorted(g[3].items())) for g in ok}) > 1:
+        return {}, max(g[1] for g in ok), (f"{len(ok)} assignments of the displayed frames to the loop's entries "
+                                           f"fit their times and levels: record longer (a whole loop)")
+    return ok[0][3], ok[0][1], ""
+
+
+def estimate_durations(visits: list[Visit], centres: np.ndarray, n: int, relative: np.ndarray | None) -> np.ndarray:
+    """Seconds per loop entry: relative (the player's holds) scaled so that the typical step between visits fits"""
+    rel = np.ones(n) if relative is None else np.asarray(relative, float)
+    steps = np.diff(centres)
+    if len(steps) == 0:
+        return rel
+    return rel / rel.mean() * float(np.median(steps))
+
+
+def motion_of(frames, visits: list[Visit]) -> float:
+    """Step 5: px of drift over the recording (mean drift per camera frame times the frames spanned), or NaN"""
+    rates = []
+    for v in visits:
+        f = v.frames
+        if len(f) >= 4:
+            m = len(f) // 2
+            rates.append(image_shift(_frames_mean(frames, f[:m]), _frames_mean(frames, f[m:]), step=2)
+                         / ((f[-1] - f[0] + 1) / 2))
+    first: dict[int, Visit] = {}
+    for v in visits:
+        if v.cls in first and v.frames[0] - first[v.cls].frames[-1] > 0:
+            a = first[v.cls]
+            span = np.mean(v.frames) - np.mean(a.frames)
+            rates.append(image_shift(_frames_mean(frames, a.frames), _frames_mean(frames, v.frames), step=2) / span)
+        first.setdefault(v.cls, v)
+    if not rates:
+        return math.nan
+    span = visits[-1].frames[-1] - visits[0].frames[0] + 1
+    return float(np.hypot(*np.median(rates, axis=0))) * span
+
+
+def _frames_mean(frames, idx: list[int]) -> np.ndarray:
+    acc = np.zeros(np.shape(frames[idx[0]]), np.float64)
+    for t in idx:
+        acc += frames[t]
+    return acc / len(idx)
+
+
+def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale: float, opts: Options = Options(),
+                    times: np.ndarray | None = None, durations: np.ndarray | None = None) -> Segmentation:
+    """Split a recording (T, H, W) into the frames of pattern.json by their content; see the module doc
+
+    times: (T,) seconds of every camera frame (sequence numbers / fps: a
+    dropped frame leaves a gap); None: one unit per frame. durations: (n,)
+    time each loop entry is shown, in the units of times (None: estimated).
+    """
+    loop = player_loop(frames_list)
+    n = len(loop)
+    T = len(frames)
+    if T < 4:
+        raise SegmentError(f"the recording is too short: {T} frame(s)")
+    t = np.arange(T, dtype=float) if times is None else np.asarray(times, float)
+    mask = screen_pixels(frames, full_scale, opts.content_step)
+    X = frame_vectors(frames, full_scale, opts.content_step, mask)
+    cr = find_runs(X, opts)
+    visits = visits_of(cr)
+    if cr.n_classes > n:
+        raise SegmentError(f"{cr.n_classes} different displayed frames seen, the player's loop has {n} entries "
+                           f"(another pattern.json, a moving view, or a flickering screen?)")
+    if len(visits) < 2:
+        raise SegmentError(f"{len(visits)} displayed frame(s) seen clean in {T} camera frames: not a recording of "
+                           f"the player, or its hold too short for this frame rate")
+    centres = np.array([(t[v.frames[0]] + t[v.frames[-1]]) / 2 for v in visits])
+    level_of = np.zeros(cr.n_classes)
+    count = np.zeros(cr.n_classes)
+    for v in visits:
+        level_of[v.cls] += X[v.frames].mean(axis=1).sum()
+        count[v.cls] += len(v.frames)
+    level_of /= np.maximum(count, 1)
+    durs = estimate_durations(visits, centres, n, None) if durations is None else np.asarray(durations, float)
+    want = expected_levels(layout, loop)
+    cmap, corr, why = identify(visits, centres, level_of, want, durs, opts)
+    if why:
+        raise SegmentError(f"{why} ({cr.n_classes} displayed frames seen in {len(visits)} visits)")
+    for v in visits:
+        v.entry = cmap.get(v.cls, -1)
+    by_entry = {e: c for c, e in cmap.items()}
+    missing = [loop[e]["file"] for e in range(1, n) if e not in by_entry]
+    if missing:
+        raise SegmentError(f"{len(missing)} frame(s) of pattern.json not seen clean: {', '.join(missing)} (record "
+                           f"longer, or hold the player's frames longer)")
+    motion = motion_of(frames, visits)
+    if np.isfinite(motion) and motion > opts.max_motion:
+        raise SegmentError(f"the camera moved: the image drifts {motion:.2f} px over the recording "
+                           f"(limit {opts.max_motion} px)")
+    images, ranges, used = {}, {}, {}
+    for e in range(1, n):
+        idx = sorted(t_ for v in visits if v.cls == by_entry[e] for t_ in v.frames)
+        f = loop[e]["file"]
+        images[f], used[f] = _frames_mean(frames, idx), idx
+        longest = max((v for v in visits if v.cls == by_entry[e]), key=lambda v: len(v.frames))
+        ranges[f] = (longest.frames[0], longest.frames[-1] + 1)
+    stretches = [Stretch(v.frames[0], v.frames[-1] + 1, (v.frames[0], v.frames[-1] + 1),
+                         float(X[v.frames].mean()), v.frames[0] == 0 or v.frames[-1] == T - 1) for v in visits]
+    markers = np.array([v.entry == 0 for v in visits])
+    first = {}
+    for i, v in enumerate(visits):
+        first.setdefault(v.entry, i)
+    order = [first.get(e, 0) for e in range(n)]
+    n_avg = min(len(u) for u in used.values())
+    verdict = LoopVerdict(order[0], order, True, "", corr, motion, n_avg)
+    level = X.mean(axis=1)
+    return Segmentation(images, ranges, stretches, markers, [verdict], 0, cr.d, level, opts.content_fraction, mask,
+                        method="content", used=used)
