@@ -28,8 +28,11 @@ pass or several), with holds as short as two camera frames:
    proportion). A lone camera frame is kept only when it agrees with the
    runs of a displayed frame seen clean elsewhere in the recording;
 3. classes: runs that show the same displayed frame (their means agree as
-   in step 1, with the noise of the means) are one class; the runs of a
-   class, merged where consecutive, are its visits;
+   in step 1, with the noise of the means, up to content_class_fraction of
+   the pixels: a run may hold a camera frame with a sliver of a blend too
+   thin for step 1, and two displayed frames differ over far more, at least
+   a few elements of the board) are one class; the runs of a class, merged
+   where consecutive, are its visits;
 4. which class is which loop entry: the visits in time order walk round the
    loop. For every entry the first visit could be, the walk assigns each
    next visit: a class seen before keeps its entry (and the time since the
@@ -139,10 +142,10 @@ class ContentRuns:
 def find_runs(X: np.ndarray, opts: Options) -> ContentRuns:
     """Steps 1-3: agreeing consecutive frames, runs, and classes of runs (see the module doc)"""
     T = len(X)
-    sig = [robust_sigma(gain_residual(X[t - 1], X[t])) for t in range(1, T)]
-    sigma = float(np.percentile(sig, 25)) if sig else 1.0
-    sigma = max(sigma, 1e-6)
-    d = np.r_[np.nan, [differing(X[t - 1], X[t], sigma, opts.content_k) for t in range(1, T)]]
+    res = [np.abs(gain_residual(X[t - 1], X[t])) for t in range(1, T)]
+    sig = [float(np.median(r)) * 1.4826 for r in res]  # (the residual's median is ~0: a robust sigma)
+    sigma = max(float(np.percentile(sig, 25)) if sig else 1.0, 1e-6)
+    d = np.r_[np.nan, [float(np.mean(r > opts.content_k * sigma)) for r in res]]
     runs, cur = [], [0]
     for t in range(1, T + 1):
         if t < T and d[t] <= opts.content_fraction:
@@ -152,21 +155,33 @@ def find_runs(X: np.ndarray, opts: Options) -> ContentRuns:
         cur = [t]
     means = [X[r].mean(axis=0) for r in runs]
     cls = [-1] * len(runs)
-    reps: list[tuple[np.ndarray, int]] = []  # class -> (mean of its first clean run, frames in it)
+    reps: list[tuple[np.ndarray, int, np.ndarray]] = []  # class -> (mean of its first clean run, frames, z-score)
+
+    def zscore(v):  # a flat picture (the black marker: noise alone) gets no z-score, and no quick look
+        sd = float(v.std())
+        return (v - v.mean()) / sd if sd > 5 * sigma else None
 
     def match(i):
         n = len(runs[i])
-        for c, (m, nm) in enumerate(reps):
+        if not reps:
+            return -1
+        # a cheap look first: the same displayed frame correlates almost perfectly (a gain changes nothing)
+        zi = zscore(means[i])
+        corr = np.array([1.0 if z is None or zi is None else float(np.mean(z * zi)) for _, _, z in reps])
+        for c in np.flatnonzero(corr > 0.9):
+            m, nm, _ = reps[c]
             s = sigma * math.sqrt((1 / n + 1 / nm) / 2)
-            if differing(m, means[i], s, opts.content_k) <= opts.content_fraction:
-                return c
+            # a lone frame must agree as closely as two consecutive frames do (it may be a blend)
+            if differing(m, means[i], s, opts.content_k) <= (opts.content_class_fraction if n >= 2 else
+                                                             opts.content_fraction):
+                return int(c)
         return -1
 
     for i in sorted(range(len(runs)), key=lambda i: -len(runs[i])):  # clean runs first, longest first
         if len(runs[i]) >= 2:
             c = match(i)
             if c < 0:
-                reps.append((means[i], len(runs[i])))
+                reps.append((means[i], len(runs[i]), zscore(means[i])))
                 c = len(reps) - 1
             cls[i] = c
         else:

@@ -32,8 +32,9 @@ class Options:
     max_jitter: float = 5.0  # frames of a stretch may differ by this many times the sensor noise
     method: str = "auto"  # 'loop' (two start markers), 'content' (capture.content), 'auto' (loop, else content)
     content_step: int = 2  # content: area downsampling of the frames compared (a thin blended band survives 2x)
-    content_k: float = 6.0  # content: a pixel differs beyond this many sigmas of the noise ...
+    content_k: float = 5.0  # content: a pixel differs beyond this many sigmas of the noise ...
     content_fraction: float = 0.003  # ... and two frames differ when more than this fraction of pixels do
+    content_class_fraction: float = 0.02  # content: two runs show different displayed frames when more differ
     content_timing: float = 1.0  # content: a visit's time may be off by this many (mean of two) entry durations
 
 

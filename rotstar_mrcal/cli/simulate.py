@@ -41,7 +41,7 @@ from rotstar_mrcal.optics.wavefront import TERMS, Seidel
 from rotstar_mrcal.optics.psf import LensPSF
 from rotstar_mrcal.simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_dataset
 from rotstar_mrcal.simulate.screen import exact_frames, png_frames, shown_light
-from rotstar_mrcal.capture.simulated import write_player_recording
+from rotstar_mrcal.capture.simulated import ALL_FLAWS, Flaws, write_player_recording
 from rotstar_mrcal.pattern.player import DEFAULT_HOLD
 from rotstar_mrcal.cli.common import (
     EXIT_CODES_HELP, EXIT_FAILED, HelpFormatter, check_output_path, fail, number_arg, out_line, run,
@@ -226,6 +226,10 @@ def _recording_arguments(p) -> None:
     r.add_argument("--loops", type=number_arg(float, 0, lo_open=True), default=2.2,
                    help="loops of the player per pose that rotstar-capture records (its --loops); each pose is "
                         "still for 1 s + this + 1 loops")
+    r.add_argument("--timing-flaws", action="store_true",
+                   help="the display's and the camera's timing flaws on (capture.simulated.ALL_FLAWS: a 5 ms LCD "
+                        "response, a 480 Hz PWM backlight, the browser a refresh late or early now and then, 1 %% "
+                        "of the camera's frames lost, its clock 200 ppm fast)")
 
 
 def _check_recording(p, args) -> None:
@@ -377,7 +381,8 @@ def _recording(args, layout, model, camera: str, encoded: float, say) -> int:
             args.recording, layout, model, rts, hold=args.hold, refresh_hz=args.refresh, fps=args.fps,
             loops=args.loops, gain=args.gain, noise=args.noise, bits=args.bits, room=args.room,
             supersample=args.supersample, psf=args.blur if args.seidel is None else LensPSF(args.seidel, (W, H)),
-            frames=screen_frames(args, layout, encoded), seed=args.seed, progress=say)
+            frames=screen_frames(args, layout, encoded), seed=args.seed, progress=say,
+            flaws=ALL_FLAWS if args.timing_flaws else Flaws())
     except (DatasetError, ValueError, RuntimeError) as e:
         fail(f"error: {e}", EXIT_FAILED)
     except OSError as e:  # a full disk: the file is removed
