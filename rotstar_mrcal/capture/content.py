@@ -33,17 +33,18 @@ pass or several), with holds as short as two camera frames:
    thin for step 1, and two displayed frames differ over far more, at least
    a few elements of the board) are one class; the runs of a class, merged
    where consecutive, are its visits;
-4. which class is which loop entry: the visits in time order walk round the
-   loop. For every entry the first visit could be, the walk assigns each
-   next visit: a class seen before keeps its entry (and the time since the
-   last visit must allow it), a new class takes the entry whose place in
-   the loop the time since the last visit points to (the player's hold
-   times; by default estimated from the visits). A hypothesis that maps two
-   classes to one entry, or whose times contradict it, is dropped; of the
-   rest, the one whose class levels follow the levels pattern.json predicts
-   (pattern.loop.expected_levels: the black marker, the border band white
-   and black, the identity frames, the checkerboard) is used, and it must
-   be the only one that does (segment.check_order), or nothing is decided;
+4. which class is which loop entry: the visits in time order walk round
+   the loop. For every entry the first visit could be, the walk assigns
+   each next visit: a class seen before keeps its entry (and the time since
+   the last visit must allow it), a new class takes the entry whose place in
+   the loop the time since the last visit points to (the player's hold per
+   kind, opts.hold / opts.marker_hold, scaled by the typical step between
+   visits). A hypothesis that maps two classes to one entry, or whose times
+   contradict it, is dropped; of the rest, the one whose class levels follow
+   the levels pattern.json predicts (pattern.loop.expected_levels: the black
+   marker, the border band white and black, the identity frames, the
+   checkerboard) is used, and it must be the only one that does
+   (segment.check_order), or nothing is decided;
 5. motion: the image shift between the two halves of the longer runs and
    between visits of the same class far apart, per camera frame; times the
    frames spanned it must stay below max_motion px;
@@ -65,7 +66,7 @@ from rotstar_mrcal.capture.segment_base import (
     LoopVerdict, Options, Segmentation, SegmentError, Stretch, _mean, check_order,
 )
 from rotstar_mrcal.pattern.layout import Layout
-from rotstar_mrcal.pattern.loop import expected_levels, player_loop
+from rotstar_mrcal.pattern.loop import entry_holds, expected_levels, player_loop
 
 
 def frame_vectors(frames, full_scale: float, step: int, mask: np.ndarray | None) -> np.ndarray:
@@ -270,13 +271,18 @@ def identify(visits: list[Visit], centres: np.ndarray, levels: np.ndarray, want:
     return ok[0][3], ok[0][1], ""
 
 
-def estimate_durations(visits: list[Visit], centres: np.ndarray, n: int, relative: np.ndarray | None) -> np.ndarray:
-    """Seconds per loop entry: relative (the player's holds) scaled so that the typical step between visits fits"""
-    rel = np.ones(n) if relative is None else np.asarray(relative, float)
+def estimate_durations(centres: np.ndarray, relative: np.ndarray) -> np.ndarray:
+    """Time per loop entry: relative (the player's holds) scaled so that the typical step between visits fits
+
+    Most steps between visits go to the next entry, so the median step is the
+    median entry's time (in the units of centres: seconds, or camera frames).
+
+    >>> estimate_durations(np.array([0.0, 4, 8, 14, 18]), np.array([2, 2, 3, 2]))
+    array([4., 4., 6., 4.])
+    """
+    rel = np.asarray(relative, float)
     steps = np.diff(centres)
-    if len(steps) == 0:
-        return rel
-    return rel / rel.mean() * float(np.median(steps))
+    return rel if len(steps) == 0 else rel / float(np.median(rel)) * float(np.median(steps))
 
 
 def motion_of(frames, visits: list[Visit]) -> float:
@@ -314,7 +320,8 @@ def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale:
 
     times: (T,) seconds of every camera frame (sequence numbers / fps: a
     dropped frame leaves a gap); None: one unit per frame. durations: (n,)
-    time each loop entry is shown, in the units of times (None: estimated).
+    time each loop entry is shown, in the units of times (None: the
+    player's holds / opts.refresh_hz with times, else estimated).
     """
     loop = player_loop(frames_list)
     n = len(loop)
@@ -339,7 +346,10 @@ def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale:
         level_of[v.cls] += X[v.frames].mean(axis=1).sum()
         count[v.cls] += len(v.frames)
     level_of /= np.maximum(count, 1)
-    durs = estimate_durations(visits, centres, n, None) if durations is None else np.asarray(durations, float)
+    rel = entry_holds(loop, opts.hold or None, None, opts.marker_hold or None)
+    if durations is None:  # seconds from the holds, or (frame numbers alone) scaled by the typical step
+        durations = rel / opts.refresh_hz if times is not None else estimate_durations(centres, rel)
+    durs = np.asarray(durations, float)
     want = expected_levels(layout, loop)
     cmap, corr, why = identify(visits, centres, level_of, want, durs, opts)
     if why:

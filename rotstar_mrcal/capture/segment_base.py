@@ -35,6 +35,9 @@ class Options:
     content_k: float = 5.0  # content: a pixel differs beyond this many sigmas of the noise ...
     content_fraction: float = 0.003  # ... and two frames differ when more than this fraction of pixels do
     content_class_fraction: float = 0.02  # content: two runs show different displayed frames when more differ
+    hold: int = 0  # content: the player's hold for every kind, refreshes (0: pattern.loop.SHORT_HOLDS per kind)
+    marker_hold: int = 0  # content: the start marker's hold (0: as hold says)
+    refresh_hz: float = 60.0  # content: the screen's refresh rate (with times in seconds: each entry's time)
     content_timing: float = 1.0  # content: a visit's time may be off by this many (mean of two) entry durations
 
 

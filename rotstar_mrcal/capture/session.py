@@ -172,7 +172,7 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
                 json.dump({"sequence": [int(v) for v in seqnums], "fps": src.fps, "exposure_us": ds.exposure,
                            "frames": n}, f)
         short = [f"{ds.what(pose)}: the source ended after {n} of {nframes} frames"] if n < nframes else []
-        out = process_recording(ds, pose, pattern, layout, buf[:n], seqnums, src.full_scale, opts)
+        out = process_recording(ds, pose, pattern, layout, buf[:n], seqnums, src.full_scale, opts, src.fps)
         out.messages[:0] = short
         return out
     finally:
@@ -182,14 +182,15 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
 
 
 def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frames: np.ndarray, seqnums: np.ndarray,
-                      full_scale: float, opts: SessionOptions) -> PoseOutcome:
-    """Segment, check and write one recording into ds; see the module doc"""
+                      full_scale: float, opts: SessionOptions, fps: float = 0.0) -> PoseOutcome:
+    """Segment, check and write one recording into ds; see the module doc (fps: the camera's, 0 if unknown)"""
     so = opts.segment
     entry = {"pose": pose, "exposure_us": ds.exposure, "frames": len(frames),
              "dropped": int(np.sum(np.maximum(np.diff(seqnums) - 1, 0)))}
     ds.log.append(entry)
     try:
-        seg = segment(frames, pattern["frames"], layout, full_scale, so, times=seqnums)
+        seg = segment(frames, pattern["frames"], layout, full_scale, so,
+                      times=np.asarray(seqnums) / fps if fps else None)
         ds.tau = seg.tau
     except SegmentError as e:
         d, _ = difference_signal(frames, full_scale, so.step, screen_pixels(frames, full_scale, so.step))

@@ -45,7 +45,7 @@ import os
 import cv2
 import numpy as np
 
-from rotstar_mrcal.pattern.loop import player_loop
+from rotstar_mrcal.pattern.loop import entry_holds, player_loop
 from rotstar_mrcal.simulate.exposure import expose
 from rotstar_mrcal.simulate.irradiance import render_irradiance
 from rotstar_mrcal.simulate.screen import exact_frames, make_screen
@@ -261,7 +261,7 @@ def pose_frames(fps: float, loop_s: float, loops: float, still_s: float) -> int:
     return int(math.ceil((still_s + (loops + 1) * loop_s) * fps))
 
 
-def write_player_recording(path: str, layout, model, rts, *, hold: int, refresh_hz: float = 60.0,
+def write_player_recording(path: str, layout, model, rts, *, hold: int | None, refresh_hz: float = 60.0,
                            fps: float = 25.0, loops: float = 2.2, still_s: float = 1.0, move_s: float = 1.0,
                            exposure_s: float = 0.016, gain: float = 0.9, noise: float = 0.01, bits: int = 16,
                            room: float = 0.02, supersample: int = 4, psf=1.0, frames=None, seed: int = 0,
@@ -279,8 +279,9 @@ def write_player_recording(path: str, layout, model, rts, *, hold: int, refresh_
     """
     from rotstar_mrcal.atomic import allocated_npy, atomic_write
 
-    n_entries = len(player_loop(layout.frames()))
-    loop_s = n_entries * hold / refresh_hz
+    holds = entry_holds(player_loop(layout.frames()), hold)  # hold None: pattern.loop.SHORT_HOLDS per kind
+    n_entries = len(holds)
+    loop_s = int(holds.sum()) / refresh_hz
     still = pose_frames(fps, loop_s, loops, still_s)
     move = int(math.ceil(move_s * fps)) if len(rts) > 1 else 0
     total = len(rts) * still + (len(rts) - 1) * move
@@ -294,7 +295,7 @@ def write_player_recording(path: str, layout, model, rts, *, hold: int, refresh_
         for i, rt in enumerate(rts):
             E = loop_irradiance(layout, model, rt, supersample=supersample, psf=psf, room=room, frames=frames)
             n = still + (move if i < len(rts) - 1 else 0)
-            sched = player_schedule(n_entries, hold, refresh_hz=refresh_hz, duration=n / fps + 1.0,
+            sched = player_schedule(n_entries, holds, refresh_hz=refresh_hz, duration=n / fps + 1.0,
                                     start_entry=int(rng.integers(n_entries)), start_phase=float(rng.uniform()),
                                     late=flaws.late, early=flaws.early, rng=rng)
             pwm = None if flaws.pwm is None else (*flaws.pwm[:2], float(rng.uniform(0, 1 / flaws.pwm[0])))

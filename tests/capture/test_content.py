@@ -30,6 +30,7 @@ LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)
 LOOP = player_loop(LAYOUT.frames())
 N = len(LOOP)
 FPS, EXPOSURE, SCAN = 25.0, 0.008, 1 / 60
+OPTS = Options(hold=6)  # the player held every entry 6 refreshes
 BLEND = 0.1  # a camera frame carrying more than this of another displayed frame at any pixel is a blend
 
 
@@ -76,7 +77,7 @@ def test_one_pass_from_mid_loop(E, tmp_path):
     frames, seq, tr = record(E)
     with pytest.raises(SegmentError):  # between start markers it cannot be done
         segment(frames, LAYOUT.frames(), LAYOUT, 65535.0, Options(method="loop"))
-    seg = segment(frames, LAYOUT.frames(), LAYOUT, 65535.0, times=seq / FPS)  # 'auto' falls back to content
+    seg = segment(frames, LAYOUT.frames(), LAYOUT, 65535.0, OPTS, times=seq / FPS)  # 'auto': content
     assert seg.method == "content" and len(seg.images) == N - 1
     check_clean(seg, tr, seq)
     assert "found by their content" in seg.summary()
@@ -91,7 +92,7 @@ def test_window_without_the_marker(E):
     sched = player_schedule(N, 6, duration=4, start_entry=1)
     T = int((N - 1) * 6 / 60 * FPS) + 1  # the last camera frame ends as the marker comes on
     frames, seq = camera_stream(E, sched, T, fps=FPS, exposure_s=EXPOSURE, scan_s=SCAN, noise=0.01, rng=1)
-    seg = segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, Options(), times=seq / FPS)
+    seg = segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, OPTS, times=seq / FPS)
     assert not seg.markers.any()
     check_clean(seg, truth(E, sched, T), seq)
 
@@ -102,7 +103,7 @@ def test_pwm_brightness_and_several_loops(E):
     rng = np.random.default_rng(5)
     gains = 1 + 0.04 * rng.uniform(-1, 1, len(frames))
     frames = np.clip(frames * gains[:, None, None], 0, 65535).astype(np.uint16)
-    seg = segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, Options(), times=seq / FPS)
+    seg = segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, OPTS, times=seq / FPS)
     check_clean(seg, tr, seq)
     assert min(len(u) for u in seg.used.values()) >= 4  # two or three passes of every frame
 
@@ -115,7 +116,7 @@ def test_a_missing_frame_is_named(E):
     frames, seq, _ = record(E, start_entry=3, drop_frames=lost)
     assert len(frames) == len(tr) - len(lost)
     with pytest.raises(SegmentError, match=r"1 frame\(s\) of pattern.json not seen clean: identity_03\.png"):
-        segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, Options(), times=seq / FPS)
+        segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, OPTS, times=seq / FPS)
 
 
 def test_another_pattern_is_refused(E):
@@ -123,7 +124,7 @@ def test_another_pattern_is_refused(E):
     six = make_layout(screen=(800, 600), pitch=100, band=24, nframes=6)
     frames, seq, _ = record(E, loops=1.5)
     with pytest.raises(SegmentError):
-        segment_content(frames, six.frames(), six, 65535.0, Options(), times=seq / FPS)
+        segment_content(frames, six.frames(), six, 65535.0, OPTS, times=seq / FPS)
 
 
 def test_pieces():

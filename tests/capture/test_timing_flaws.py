@@ -2,7 +2,8 @@
 
 Each recording: the capture's simulated camera (capture.simulated.record_player,
 the code path rotstar-simulate --recording writes) filming the looping player
-(20 entries, hold 7 refreshes at 60 Hz: 117 ms) at 25 fps, 8 ms exposures, for
+(20 entries, held as pattern.loop.SHORT_HOLDS says: the rotating star 9 refreshes at 60 Hz, 150 ms, the
+rest 6, 100 ms; 2.35 s a loop) at 25 fps, 8 ms exposures, for
 one loop and two entries from a random point of the loop, with every flaw on
 (simulated.ALL_FLAWS: the panel scanning out over a refresh, a 5 ms LCD
 response, a 480 Hz PWM backlight, the browser a refresh late or early, the
@@ -36,12 +37,13 @@ from rotstar_mrcal.capture.simulated import (
 )
 from rotstar_mrcal.capture.backend_replay import ReplaySource
 from rotstar_mrcal.pattern.layout import make_layout
-from rotstar_mrcal.pattern.loop import player_loop
+from rotstar_mrcal.pattern.loop import entry_holds, player_loop
 
 LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)
 LOOP = player_loop(LAYOUT.frames())
 N = len(LOOP)
-HOLD, FPS, EXPOSURE = 7, 25.0, 0.008
+HOLDS = entry_holds(LOOP)  # the player's holds for a short capture: 9 refreshes the rotating star, 6 the rest
+FPS, EXPOSURE = 25.0, 0.008
 BLEND, CLEAN = 0.1, 0.02
 
 
@@ -62,9 +64,9 @@ def one(E, s: int):
     """One flawed recording and its split: (kept, missing files by truth, accepted frames of another entry,
     accepted blends, largest accepted impurity)"""
     rng = np.random.default_rng([7, s])
-    T = int((N + 2) * HOLD / 60 * FPS)
+    T = int((HOLDS.sum() + 2 * HOLDS.max()) / 60 * FPS)  # one loop and two entries
     truth: list = []
-    frames, seq = record_player(E, HOLD, T, ALL_FLAWS, fps=FPS, exposure_s=EXPOSURE, start_entry=int(rng.integers(N)),
+    frames, seq = record_player(E, HOLDS, T, ALL_FLAWS, fps=FPS, exposure_s=EXPOSURE, start_entry=int(rng.integers(N)),
                                 start_phase=float(rng.uniform()), rng=rng, truth=truth, noise=0.01)
     missing = {LOOP[e]["file"] for e in range(1, N)} - {LOOP[e]["file"] for e in seen(truth, seq)}
     try:
@@ -144,12 +146,35 @@ def test_replayed_flawed_recording(tmp_path):
     rt = simulate.random_poses(model, LAYOUT, 1, np.random.default_rng(5))
     fn = str(tmp_path / "rec.npy")
     flaws = dataclasses.replace(ALL_FLAWS, drop_rate=0.03)
-    n = write_player_recording(fn, LAYOUT, model, rt, hold=HOLD, loops=1.0, still_s=0.1, exposure_s=EXPOSURE,
+    n = write_player_recording(fn, LAYOUT, model, rt, hold=7, loops=1.0, still_s=0.1, exposure_s=EXPOSURE,
                                supersample=1, seed=3, flaws=flaws)
     src = ReplaySource(fn)
     seq = src.sequence_numbers()
     assert len(src) == n and seq[-1] + 1 > n  # frames lost: gaps in the sequence numbers
     with open(str(tmp_path / "rec.json")) as f:
         assert json.load(f)["simulated"]["flaws"]["drop_rate"] == 0.03
-    seg = segment(src.frames(), LAYOUT.frames(), LAYOUT, src.full_scale, times=seq / src.fps)
+    seg = segment(src.frames(), LAYOUT.frames(), LAYOUT, src.full_scale, Options(hold=7), times=seq / src.fps)
     assert len(seg.images) == N - 1 and seg.method in ("content", "loop")
+
+
+@pytest.mark.slow
+def test_short_holds_with_flaws_through_the_commands(tmp_path, run_cli):
+    """rotstar-simulate --recording --hold short --timing-flaws, two loops of the first pose (what a camera records
+    from anywhere in the loop; one loop is not always enough, test_flawed_recordings_200), rotstar-segment --hold short, rotstar-detect: every corner"""
+    (tmp_path / "pattern").mkdir()
+    (tmp_path / "pattern" / "pattern.json").write_text(LAYOUT.to_json())
+    rec = tmp_path / "rec.npy"
+    r = run_cli("rotstar-simulate", "--recording", rec, "--pattern", tmp_path / "pattern", "--camera", "pinhole-small",
+                "--hold", "short", "--timing-flaws", "--loops", 1, "--supersample", 2, "--poses", 1, "--seed", 4)
+    assert r.returncode == 0, r.stderr
+    meta = json.loads(rec.with_suffix(".json").read_text())
+    first = tmp_path / "first.npy"
+    n = int((2 * HOLDS.sum() + 2 * HOLDS.max()) / 60 * FPS)  # two loops and two entries (5.1 s)
+    np.save(first, np.load(rec, mmap_mode="r")[15:15 + n])  # from wherever the loop is 0.6 s in
+    (tmp_path / "first.json").write_text(json.dumps({"sequence": meta["sequence"][15:15 + n], "fps": meta["fps"]}))
+    r = run_cli("rotstar-segment", first, "--pattern", tmp_path / "pattern", "--out", tmp_path / "seq" / "pose000",
+                "--hold", "short")
+    assert r.returncode == 0, r.stderr
+    assert "found by their content" in r.stderr and "24 of 24 corners" in r.stderr, r.stderr
+    r = run_cli("rotstar-detect", tmp_path / "seq", "-o", tmp_path / "corners.vnl")
+    assert r.returncode == 0, r.stderr
