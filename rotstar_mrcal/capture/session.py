@@ -41,6 +41,8 @@ from rotstar_mrcal.capture.source import CaptureError, FrameSource, record
 class SessionOptions:
     segment: Options = dataclasses.field(default_factory=Options)
     keep_raw: bool = False  # keep OUT/raw/<pose>.npy (+ .json) after segmentation
+    until_enough: int = 0  # > 0: record this many frames, then more (a third as many at a time) until every frame
+    #                        of pattern.json has opts.segment.min_average clean camera frames, at most nframes
 
 
 @dataclasses.dataclass
@@ -163,8 +165,11 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
         raise CaptureError(str(e)) from None
     try:
         buf[0] = first.image
-        rec = record(src, nframes - 1, out=buf[1:]) if nframes > 1 else None
-        seqnums = np.r_[first.sequence, rec.sequence] if rec else np.array([first.sequence])
+        if opts.until_enough:
+            seqnums = record_until_enough(src, buf, first.sequence, pattern, layout, opts)
+        else:
+            rec = record(src, nframes - 1, out=buf[1:]) if nframes > 1 else None
+            seqnums = np.r_[first.sequence, rec.sequence] if rec else np.array([first.sequence])
         n = len(seqnums)
         if opts.keep_raw:
             buf.flush()
@@ -174,11 +179,54 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
         short = [f"{ds.what(pose)}: the source ended after {n} of {nframes} frames"] if n < nframes else []
         out = process_recording(ds, pose, pattern, layout, buf[:n], seqnums, src.full_scale, opts, src.fps)
         out.messages[:0] = short
+        if src.fps:  # the time the camera and the screen stood still for this recording
+            secs = (int(seqnums[-1]) - int(seqnums[0]) + 1) / src.fps
+            ds.log[-1]["seconds"] = secs
+            out.messages.append(f"{ds.what(pose)}: {secs:.1f} s at the screen ({n} camera frames)")
         return out
     finally:
         del buf
         if not opts.keep_raw:
             os.remove(raw)
+
+
+def enough(frames, seqnums: np.ndarray, pattern: dict, layout, full_scale: float, opts: SessionOptions,
+           fps: float) -> bool:
+    """Every frame of pattern.json split off with at least opts.segment.min_average clean camera frames"""
+    try:
+        seg = segment(frames, pattern["frames"], layout, full_scale, opts.segment,
+                      times=np.asarray(seqnums) / fps if fps else None)
+    except SegmentError:
+        return False
+    counts = [len(u) for u in seg.used.values()] if seg.used else \
+        [b - a for a, b in seg.ranges.values()]
+    return min(counts) >= opts.segment.min_average
+
+
+def record_until_enough(src: FrameSource, buf, first_seq: int, pattern: dict, layout, opts: SessionOptions) -> np.ndarray:
+    """Record into buf (buf[0] holds the first frame) until enough() or buf is full; the sequence numbers
+
+    The first look is opts.until_enough frames, then a third of that at a
+    time. (While a look is split, a camera's driver may drop frames: they
+    are gaps in the sequence numbers, which segmentation takes as time.)
+    """
+    seq = [first_seq]
+    want = min(opts.until_enough, len(buf))
+    while True:
+        n = len(seq)
+        if want > n:
+            try:
+                got = record(src, want - n, out=buf[n:want]).sequence.tolist()
+            except CaptureError:  # the source has nothing left
+                got = []
+            seq += got
+            if len(got) < want - n:  # it ended: what there is
+                break
+        if len(seq) >= len(buf) or enough(buf[:len(seq)], np.array(seq), pattern, layout, src.full_scale, opts,
+                                          src.fps):
+            break
+        want = min(len(buf), len(seq) + max(1, opts.until_enough // 3))
+    return np.array(seq)
 
 
 def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frames: np.ndarray, seqnums: np.ndarray,

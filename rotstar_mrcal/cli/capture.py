@@ -181,6 +181,10 @@ def _recording_arguments(p) -> None:
                                                             "whole loop wherever the recording starts)")
     r.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD, help=f"{HOLD_HELP} (default {DEFAULT_HOLD})")
     r.add_argument("--refresh", type=float, default=60.0, help="the screen's refresh rate, Hz (default 60)")
+    r.add_argument("--until-enough", action="store_true",
+                   help="record one loop of the player and two frames, then more, until every frame of pattern.json "
+                        "has two clean camera frames (split by their content); the recording's length "
+                        "(--loops, --frames) is the limit. Says the seconds each pose took")
     r.add_argument("--poses", type=int, default=0, help="stop after this many poses (default: until q or the end of a replay)")
     r.add_argument("--auto", action="store_true",
                    help="start the next pose when the view has moved and then been still for --still seconds")
@@ -256,6 +260,12 @@ def frames_per_recording(a, holds, fps: float) -> int:
         raise CaptureError("the frame rate is unknown (a replay without one): give --frames N or --fps")
     loop_s = int(np.sum(holds)) / a.refresh
     return int(np.ceil(a.loops * loop_s * fps))
+
+
+def first_look(a, pattern: dict, fps: float) -> int:
+    """--until-enough's first recording: one loop of the player and its two longest entries, in camera frames"""
+    holds = entry_holds(player_loop(pattern["frames"]), a.hold)
+    return int(np.ceil((holds.sum() + 2 * holds.max()) / a.refresh * (fps or 25.0)))
 
 
 def default_controls(a) -> tuple[float | None, str]:
@@ -454,7 +464,8 @@ def _start(a, src, log: dict, holds) -> int:
 
 def _record_poses(a, src, datasets, pattern, layout, nframes: int, raw_dir: str, log: dict) -> None:
     """Until --poses poses with a board (or the user's q, the recording's end): wait for a view, record it"""
-    opts = SessionOptions(dataclasses.replace(options_from(a), hold=a.hold or 0, refresh_hz=a.refresh), a.keep_raw)
+    opts = SessionOptions(dataclasses.replace(options_from(a), hold=a.hold or 0, refresh_hz=a.refresh), a.keep_raw,
+                          first_look(a, pattern, src.fps) if a.until_enough else 0)
     pose_no = next_free_pose([d.folder for d in datasets])
     src.start()
     taken, tau = 0, None

@@ -22,8 +22,10 @@ pose that is refused names frames that were not seen.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import re
+import sys
 
 import cv2
 import numpy as np
@@ -178,3 +180,28 @@ def test_short_holds_with_flaws_through_the_commands(tmp_path, run_cli):
     assert "found by their content" in r.stderr and "24 of 24 corners" in r.stderr, r.stderr
     r = run_cli("rotstar-detect", tmp_path / "seq", "-o", tmp_path / "corners.vnl")
     assert r.returncode == 0, r.stderr
+
+
+@pytest.mark.slow
+def test_capture_records_until_enough(tmp_path, run_cli, capsys, monkeypatch):
+    """rotstar-capture --until-enough on a replayed flawed short-hold recording: it stops as soon as every frame has
+    two clean camera frames, well before the --loops limit, says the seconds, and the pose has the whole board"""
+    from rotstar_mrcal.cli.capture import main as rotstar_capture
+
+    (tmp_path / "pattern").mkdir()
+    (tmp_path / "pattern" / "pattern.json").write_text(LAYOUT.to_json())
+    rec = tmp_path / "rec.npy"
+    r = run_cli("rotstar-simulate", "--recording", rec, "--pattern", tmp_path / "pattern", "--camera", "pinhole-small",
+                "--hold", "short", "--timing-flaws", "--loops", 2, "--supersample", 2, "--poses", 1, "--seed", 5)
+    assert r.returncode == 0, r.stderr
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n"))
+    code = rotstar_capture(["--backend", "replay", "--device", str(rec), "--pattern", str(tmp_path / "pattern"),
+                            "--hold", "short", "--loops", "2", "--until-enough", "--poses", "1",
+                            "--out", str(tmp_path / "seq")])
+    out, err = capsys.readouterr()
+    assert code == 0 and "board complete (24/24)" in err, err
+    secs = [float(m) for m in re.findall(r"pose000: ([\d.]+) s at the screen", err)]
+    limit = 2 * HOLDS.sum() / 60
+    assert len(secs) == 1 and secs[0] < 0.8 * limit, (secs, limit, err)
+    info = json.loads((tmp_path / "seq" / "pose000" / "segment.json").read_text())
+    assert info["method"] == "content" and min(len(u) for u in info["frames_used"].values()) >= 2
