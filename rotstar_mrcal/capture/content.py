@@ -61,9 +61,9 @@ import math
 
 import numpy as np
 
-from rotstar_mrcal.capture.motion import downsample, image_shift, screen_pixels
+from rotstar_mrcal.capture.motion import difference_signal, downsample, image_shift, screen_pixels
 from rotstar_mrcal.capture.segment_base import (
-    LoopVerdict, Options, Segmentation, SegmentError, Stretch, _mean, check_order,
+    LoopVerdict, Options, Segmentation, SegmentError, Stretch, _mean, check_order, threshold,
 )
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.pattern.loop import entry_holds, expected_levels, player_loop
@@ -381,6 +381,8 @@ def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale:
     order = [first.get(e, 0) for e in range(n)]
     n_avg = min(len(u) for u in used.values())
     verdict = LoopVerdict(order[0], order, True, "", corr, motion, n_avg)
-    level = X.mean(axis=1)
-    return Segmentation(images, ranges, stretches, markers, [verdict], 0, cr.d, level, opts.content_fraction, mask,
-                        method="content", used=used)
+    # the difference signal and threshold of segment_loops, for plots and rotstar-capture --auto (not for the split)
+    dmask = screen_pixels(frames, full_scale, opts.step)
+    d, level = difference_signal(frames, full_scale, opts.step, dmask)
+    return Segmentation(images, ranges, stretches, markers, [verdict], 0, d, level, threshold(d, opts.k, opts.ratio),
+                        dmask, method="content", used=used)

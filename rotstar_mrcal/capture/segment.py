@@ -89,29 +89,12 @@ from rotstar_mrcal.pattern.loop import expected_levels, player_loop
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.capture.motion import difference_signal, image_shift, noise_floor, screen_pixels
 from rotstar_mrcal.capture.segment_base import (  # noqa: F401  (re-exported: the types segmentation returns)
-    LoopVerdict, Options, Segmentation, SegmentError, Stretch, _mean, check_order,
+    LoopVerdict, Options, Segmentation, SegmentError, Stretch, _mean, check_order, threshold,
 )
 from rotstar_mrcal.capture.content import segment_content
 
 
 # ---- the steps -------------------------------------------------------------------
-def threshold(d: np.ndarray, k: float = 6.0, ratio: float = 3.0) -> float:
-    """Robust threshold separating the noise floor of d from the changes
-
-    SYNOPSIS
-
-        >>> d = np.r_[np.nan, np.full(50, 0.01), 0.2, np.full(50, 0.01)]
-        >>> round(threshold(d), 3)
-        0.03
-    """
-    v = d[np.isfinite(d)]
-    if len(v) == 0:
-        raise SegmentError("the recording has fewer than two frames")
-    med = float(np.median(v))
-    mad = float(np.median(np.abs(v - med))) * 1.4826
-    return med + max(k * mad, (ratio - 1) * med, 1e-9)
-
-
 def stable_runs(d: np.ndarray, tau: float, min_len: int) -> list[tuple[int, int]]:
     """[start, stop) of the maximal runs of frames joined by d < tau, at least min_len long
 

@@ -117,3 +117,20 @@ def _mean(frames, a: int, b: int) -> np.ndarray:
     for t in range(a, b):
         acc += frames[t]
     return acc / (b - a)
+
+
+def threshold(d: np.ndarray, k: float = 6.0, ratio: float = 3.0) -> float:
+    """Robust threshold separating the noise floor of d from the changes
+
+    SYNOPSIS
+
+        >>> d = np.r_[np.nan, np.full(50, 0.01), 0.2, np.full(50, 0.01)]
+        >>> round(threshold(d), 3)
+        0.03
+    """
+    v = d[np.isfinite(d)]
+    if len(v) == 0:
+        raise SegmentError("the recording has fewer than two frames")
+    med = float(np.median(v))
+    mad = float(np.median(np.abs(v - med))) * 1.4826
+    return med + max(k * mad, (ratio - 1) * med, 1e-9)
