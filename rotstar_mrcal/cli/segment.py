@@ -108,7 +108,8 @@ def plot_signal(fn: str, seg, title: str) -> None:
     fig, ax = plt.subplots(figsize=(12, 4))
     ax.semilogy(seg.d, lw=0.8, color="k", label="mean |difference| (fraction of full scale)")
     ax.axhline(seg.tau, color="r", lw=0.8, label="threshold")
-    used = set(seg.loop.stretches)
+    # between markers: the stretches of the loop used; by content: every clean visit of a frame is averaged
+    used = set(range(len(seg.stretches))) if seg.method == "content" else set(seg.loop.stretches)
     for k, s in enumerate(seg.stretches):
         colour = "tab:purple" if seg.markers[k] else "tab:green" if k in used else "tab:gray"
         ax.axvspan(s.start, s.stop - 0.5, color=colour, alpha=0.15, lw=0)
