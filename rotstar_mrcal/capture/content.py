@@ -124,6 +124,29 @@ def differing(x: np.ndarray, y: np.ndarray, sigma: float, k: float) -> float:
     return float(np.mean(np.abs(gain_residual(x, y)) > k * sigma))
 
 
+def agreeing_fraction(X: np.ndarray, sigma: float, k: float = 5.0, fraction: float = 0.003) -> float:
+    """Fraction of consecutive frames of X (T, P) that show the same picture (step 1 of the module doc)
+
+    sigma: the noise of the difference of two frames (from within a frame,
+    motion.noise_floor: a window of a moving view has no quiet pairs to
+    measure it on). A still view of the player: most pairs agree with long
+    holds, a third to two thirds with short ones; a moving view: hardly any.
+
+    SYNOPSIS
+
+        >>> rng = np.random.default_rng(0)
+        >>> pic = rng.uniform(0, 1, 500)
+        >>> still = np.stack([pic + 0.01 * rng.standard_normal(500) for _ in range(9)])
+        >>> moving = np.stack([np.roll(pic, i) + 0.01 * rng.standard_normal(500) for i in range(9)])
+        >>> agreeing_fraction(still, 0.014), agreeing_fraction(moving, 0.014)
+        (1.0, 0.0)
+    """
+    res = [np.abs(gain_residual(X[t - 1], X[t])) for t in range(1, len(X))]
+    if not res:
+        return 0.0
+    return float(np.mean([np.mean(r > k * sigma) <= fraction for r in res]))
+
+
 @dataclasses.dataclass
 class Visit:
     frames: list[int]  # camera frames averaged (clean, consecutive or nearly)

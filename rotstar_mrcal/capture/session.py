@@ -31,8 +31,9 @@ from rotstar_mrcal.atomic import allocated_npy, atomic_path, atomic_write
 from rotstar_mrcal.detect.display_offsets import DisplayCheck, dataset_offsets
 from rotstar_mrcal.vnl import mrcal_keeps, mrcal_min_corners
 from rotstar_mrcal.capture import coverage
-from rotstar_mrcal.capture.motion import difference_signal, downsample, is_still, screen_pixels
+from rotstar_mrcal.capture.motion import difference_signal, downsample, is_still, noise_floor, screen_pixels
 from rotstar_mrcal.capture.pose import quick_check, value_scale, write_segmented
+from rotstar_mrcal.capture.content import agreeing_fraction
 from rotstar_mrcal.capture.segment import Options, SegmentError, segment, threshold
 from rotstar_mrcal.capture.source import CaptureError, FrameSource, record
 
@@ -94,12 +95,18 @@ class OutputDataset:
 
 
 def wait_for_new_view(src: FrameSource, tau: float, fps: float, still_s: float, need_motion: bool,
-                      step: int = 4) -> bool:
+                      step: int = 4, by_content: bool = False) -> bool:
     """Read frames until the view has moved (if need_motion) and then stayed still; False at the end
 
     Still and moving are motion.is_still over the last still_s seconds: still
     when 75 % of consecutive frames agree up to noise, moving below 30 %.
+    by_content (the player's short holds, where a still view changes every
+    two or three camera frames): consecutive frames compared as the split by
+    content does (content.agreeing_fraction): still when 30 % agree, moving
+    below 10 %.
     """
+    if by_content:
+        return _wait_by_content(src, fps, still_s, need_motion, step)
     n = max(10, int(round(still_s * (fps or 25))))
     window = collections.deque(maxlen=n + 1)
     moved = not need_motion
@@ -114,6 +121,26 @@ def wait_for_new_view(src: FrameSource, tau: float, fps: float, still_s: float, 
         if not moved and not is_still(d, tau, 0.3):
             moved = True
         elif moved and is_still(d, tau, 0.75):
+            return True
+
+
+def _wait_by_content(src: FrameSource, fps: float, still_s: float, need_motion: bool, step: int) -> bool:
+    n = max(10, int(round(still_s * (fps or 25))))
+    window = collections.deque(maxlen=n + 1)
+    moved = not need_motion
+    while True:
+        f = src.read()
+        if f is None:
+            return False
+        window.append(downsample(f.image, step).ravel() / np.float32(src.full_scale))
+        if len(window) < window.maxlen:
+            continue
+        # the noise of two block means' difference, from within the frame (motion.noise_floor's mean |difference|)
+        sigma = noise_floor(f.image, src.full_scale, step) / 1.128 * np.sqrt(2)
+        agree = agreeing_fraction(np.stack(window), sigma)
+        if not moved and agree < 0.1:
+            moved = True
+        elif moved and agree >= 0.3:
             return True
 
 

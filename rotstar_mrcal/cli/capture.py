@@ -498,7 +498,7 @@ def _next_view(a, src, pose: str, nframes: int, tau) -> bool:
         skip(src, a.settle)
     elif tau is not None:  # (the first pose of --auto is recorded at once)
         say(f"rotstar-capture: {pose}: waiting for the view to move and then be still ...")
-        if not wait_for_new_view(src, tau, src.fps, a.still, need_motion=True):
+        if not wait_for_new_view(src, tau, src.fps, a.still, need_motion=True, by_content=a.hold is None):
             say("rotstar-capture: the recording ended")
             return False
     return True

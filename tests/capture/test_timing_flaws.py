@@ -205,3 +205,23 @@ def test_capture_records_until_enough(tmp_path, run_cli, capsys, monkeypatch):
     assert len(secs) == 1 and secs[0] < 0.8 * limit, (secs, limit, err)
     info = json.loads((tmp_path / "seq" / "pose000" / "segment.json").read_text())
     assert info["method"] == "content" and min(len(u) for u in info["frames_used"].values()) >= 2
+
+
+@pytest.mark.slow
+def test_auto_with_short_holds(tmp_path, run_cli, capsys):
+    """--auto with the short holds: the next pose once the view has moved and is still again, by content (the
+    plain difference test wants most consecutive frames equal, which short holds never give)"""
+    from rotstar_mrcal.cli.capture import main as rotstar_capture
+
+    (tmp_path / "pattern").mkdir()
+    (tmp_path / "pattern" / "pattern.json").write_text(LAYOUT.to_json())
+    rec = tmp_path / "rec.npy"
+    r = run_cli("rotstar-simulate", "--recording", rec, "--pattern", tmp_path / "pattern", "--camera", "pinhole-small",
+                "--hold", "short", "--timing-flaws", "--loops", 1, "--supersample", 2, "--poses", 2, "--seed", 6)
+    assert r.returncode == 0, r.stderr
+    code = rotstar_capture(["--backend", "replay", "--device", str(rec), "--pattern", str(tmp_path / "pattern"),
+                            "--hold", "short", "--loops", "2", "--until-enough", "--auto", "--poses", "2",
+                            "--out", str(tmp_path / "seq")])
+    out, err = capsys.readouterr()
+    assert code == 0 and err.count("board complete (24/24)") == 2, err
+    assert len(re.findall(r"pose00[01]: [\d.]+ s at the screen", err)) == 2, err
