@@ -337,6 +337,62 @@ def _frames_mean(frames, idx: list[int]) -> np.ndarray:
     return acc / len(idx)
 
 
+def class_levels(X: np.ndarray, visits: list[Visit], n_classes: int) -> np.ndarray:
+    """(n_classes,) mean level of every class over all its camera frames"""
+    level_of, count = np.zeros(n_classes), np.zeros(n_classes)
+    for v in visits:
+        level_of[v.cls] += X[v.frames].mean(axis=1).sum()
+        count[v.cls] += len(v.frames)
+    return level_of / np.maximum(count, 1)
+
+
+def assign_entries(visits: list[Visit], X: np.ndarray, n_classes: int, t: np.ndarray, loop: list[dict], layout: Layout,
+                   opts: Options, seconds: bool, durations) -> tuple[dict[int, int], float]:
+    """Step 4 and 6 of the module doc: {entry: class} for every loop entry but the marker, and the correlation"""
+    centres = np.array([(t[v.frames[0]] + t[v.frames[-1]]) / 2 for v in visits])
+    rel = entry_holds(loop, opts.hold or None, None, opts.marker_hold or None)
+    if durations is None:  # seconds from the holds, or (frame numbers alone) scaled by the typical step
+        durations = rel / opts.refresh_hz if seconds else estimate_durations(centres, rel)
+    cmap, corr, why = identify(visits, centres, class_levels(X, visits, n_classes), expected_levels(layout, loop),
+                               np.asarray(durations, float), opts)
+    if why:
+        raise SegmentError(f"{why} ({n_classes} displayed frames seen in {len(visits)} visits)")
+    for v in visits:
+        v.entry = cmap.get(v.cls, -1)
+    by_entry = {e: c for c, e in cmap.items()}
+    missing = [loop[e]["file"] for e in range(1, len(loop)) if e not in by_entry]
+    if missing:
+        raise SegmentError(f"{len(missing)} frame(s) of pattern.json not seen clean: {', '.join(missing)} (record "
+                           f"longer, or hold the player's frames longer)")
+    return by_entry, corr
+
+
+def content_segmentation(frames, X: np.ndarray, visits: list[Visit], by_entry: dict[int, int], loop: list[dict],
+                         full_scale: float, corr: float, motion: float, opts: Options) -> Segmentation:
+    """The Segmentation of a split by content: every clean camera frame of each entry averaged"""
+    T = len(frames)
+    images, ranges, used = {}, {}, {}
+    for e in range(1, len(loop)):
+        mine = [v for v in visits if v.cls == by_entry[e]]
+        f = loop[e]["file"]
+        used[f] = sorted(i for v in mine for i in v.frames)
+        images[f] = _frames_mean(frames, used[f])
+        longest = max(mine, key=lambda v: len(v.frames))
+        ranges[f] = (longest.frames[0], longest.frames[-1] + 1)
+    stretches = [Stretch(v.frames[0], v.frames[-1] + 1, (v.frames[0], v.frames[-1] + 1),
+                         float(X[v.frames].mean()), v.frames[0] == 0 or v.frames[-1] == T - 1) for v in visits]
+    first: dict[int, int] = {}
+    for i, v in enumerate(visits):
+        first.setdefault(v.entry, i)
+    order = [first.get(e, 0) for e in range(len(loop))]
+    verdict = LoopVerdict(order[0], order, True, "", corr, motion, min(len(u) for u in used.values()))
+    # the difference signal and threshold of segment_loops, for plots and rotstar-capture --auto (not for the split)
+    dmask = screen_pixels(frames, full_scale, opts.step)
+    d, level = difference_signal(frames, full_scale, opts.step, dmask)
+    return Segmentation(images, ranges, stretches, np.array([v.entry == 0 for v in visits]), [verdict], 0, d, level,
+                        threshold(d, opts.k, opts.ratio), dmask, method="content", used=used)
+
+
 def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale: float, opts: Options = Options(),
                     times: np.ndarray | None = None, durations: np.ndarray | None = None) -> Segmentation:
     """Split a recording (T, H, W) into the frames of pattern.json by their content; see the module doc
@@ -347,65 +403,22 @@ def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale:
     player's holds / opts.refresh_hz with times, else estimated).
     """
     loop = player_loop(frames_list)
-    n = len(loop)
     T = len(frames)
     if T < 4:
         raise SegmentError(f"the recording is too short: {T} frame(s)")
     t = np.arange(T, dtype=float) if times is None else np.asarray(times, float)
-    mask = screen_pixels(frames, full_scale, opts.content_step)
-    X = frame_vectors(frames, full_scale, opts.content_step, mask)
+    X = frame_vectors(frames, full_scale, opts.content_step, screen_pixels(frames, full_scale, opts.content_step))
     cr = find_runs(X, opts)
     visits = visits_of(cr)
-    if cr.n_classes > n:
-        raise SegmentError(f"{cr.n_classes} different displayed frames seen, the player's loop has {n} entries "
-                           f"(another pattern.json, a moving view, or a flickering screen?)")
+    if cr.n_classes > len(loop):
+        raise SegmentError(f"{cr.n_classes} different displayed frames seen, the player's loop has {len(loop)} "
+                           f"entries (another pattern.json, a moving view, or a flickering screen?)")
     if len(visits) < 2:
         raise SegmentError(f"{len(visits)} displayed frame(s) seen clean in {T} camera frames: not a recording of "
                            f"the player, or its hold too short for this frame rate")
-    centres = np.array([(t[v.frames[0]] + t[v.frames[-1]]) / 2 for v in visits])
-    level_of = np.zeros(cr.n_classes)
-    count = np.zeros(cr.n_classes)
-    for v in visits:
-        level_of[v.cls] += X[v.frames].mean(axis=1).sum()
-        count[v.cls] += len(v.frames)
-    level_of /= np.maximum(count, 1)
-    rel = entry_holds(loop, opts.hold or None, None, opts.marker_hold or None)
-    if durations is None:  # seconds from the holds, or (frame numbers alone) scaled by the typical step
-        durations = rel / opts.refresh_hz if times is not None else estimate_durations(centres, rel)
-    durs = np.asarray(durations, float)
-    want = expected_levels(layout, loop)
-    cmap, corr, why = identify(visits, centres, level_of, want, durs, opts)
-    if why:
-        raise SegmentError(f"{why} ({cr.n_classes} displayed frames seen in {len(visits)} visits)")
-    for v in visits:
-        v.entry = cmap.get(v.cls, -1)
-    by_entry = {e: c for c, e in cmap.items()}
-    missing = [loop[e]["file"] for e in range(1, n) if e not in by_entry]
-    if missing:
-        raise SegmentError(f"{len(missing)} frame(s) of pattern.json not seen clean: {', '.join(missing)} (record "
-                           f"longer, or hold the player's frames longer)")
+    by_entry, corr = assign_entries(visits, X, cr.n_classes, t, loop, layout, opts, times is not None, durations)
     motion = motion_of(frames, visits)
     if np.isfinite(motion) and motion > opts.max_motion:
         raise SegmentError(f"the camera moved: the image drifts {motion:.2f} px over the recording "
                            f"(limit {opts.max_motion} px)")
-    images, ranges, used = {}, {}, {}
-    for e in range(1, n):
-        idx = sorted(t_ for v in visits if v.cls == by_entry[e] for t_ in v.frames)
-        f = loop[e]["file"]
-        images[f], used[f] = _frames_mean(frames, idx), idx
-        longest = max((v for v in visits if v.cls == by_entry[e]), key=lambda v: len(v.frames))
-        ranges[f] = (longest.frames[0], longest.frames[-1] + 1)
-    stretches = [Stretch(v.frames[0], v.frames[-1] + 1, (v.frames[0], v.frames[-1] + 1),
-                         float(X[v.frames].mean()), v.frames[0] == 0 or v.frames[-1] == T - 1) for v in visits]
-    markers = np.array([v.entry == 0 for v in visits])
-    first = {}
-    for i, v in enumerate(visits):
-        first.setdefault(v.entry, i)
-    order = [first.get(e, 0) for e in range(n)]
-    n_avg = min(len(u) for u in used.values())
-    verdict = LoopVerdict(order[0], order, True, "", corr, motion, n_avg)
-    # the difference signal and threshold of segment_loops, for plots and rotstar-capture --auto (not for the split)
-    dmask = screen_pixels(frames, full_scale, opts.step)
-    d, level = difference_signal(frames, full_scale, opts.step, dmask)
-    return Segmentation(images, ranges, stretches, markers, [verdict], 0, d, level, threshold(d, opts.k, opts.ratio),
-                        dmask, method="content", used=used)
+    return content_segmentation(frames, X, visits, by_entry, loop, full_scale, corr, motion, opts)
