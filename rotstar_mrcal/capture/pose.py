@@ -124,6 +124,8 @@ def write_into(folder: str, seg: Segmentation, full_scale: float, scale: float =
         "drift_px": v.motion_px,
         "recorded_full_scale": full_scale,
         "value_scale": scale,
+        "method": seg.method,
+        **({"frames_used": {f: [int(t) for t in u] for f, u in seg.used.items()}} if seg.used else {}),
         **(extra or {}),
     }
     with open(os.path.join(folder, "segment.json"), "w") as f:

@@ -68,7 +68,7 @@ def check_recordings(recordings, names: list[str] | None = None) -> None:
         >>> check_recordings([np.zeros((5, 2, 2)), np.zeros((4, 2, 2))])
         Traceback (most recent call last):
         ...
-        rotstar_mrcal.capture.segment.SegmentError: the cameras hold different frame counts (camera-0: 5, camera-1: 4): record them together (rotstar-capture --stereo / --rgb-device)
+        rotstar_mrcal.capture.segment_base.SegmentError: the cameras hold different frame counts (camera-0: 5, camera-1: 4): record them together (rotstar-capture --stereo / --rgb-device)
     """
     names = names or [f"camera-{k}" for k in range(len(recordings))]
     for name, r in zip(names, recordings):
@@ -107,7 +107,8 @@ def follow(frames, reference: Segmentation, loop: list[dict], want: np.ndarray, 
     mask = screen_pixels(frames, full_scale, opts.step)
     d, level = difference_signal(frames, full_scale, opts.step, mask)
     tau = threshold(d, opts.k, opts.ratio)
-    marker = reference.stretches[reference.loop.stretches[0]].core
+    # the start marker's frames (a split by content may not have seen it: then it is left out of the order check)
+    marker = reference.stretches[reference.loop.stretches[0]].core if reference.markers.any() else None
     images, ranges, levels, trimmed = {}, {}, [], 0
     for entry, (file, (a0, b0)) in zip(loop[1:], reference.ranges.items()):
         assert entry["file"] == file
@@ -122,8 +123,10 @@ def follow(frames, reference: Segmentation, loop: list[dict], want: np.ndarray, 
         trimmed += (a - a0) + (b0 - b)
         images[file], ranges[file] = _mean(frames, a, b), (a, b)
         levels.append(float(np.mean(level[a:b])))
-    rec = np.r_[np.mean(level[marker[0] : marker[1]]), levels]
-    corr, why = check_order(rec, want, opts.min_correlation)
+    if marker is None:
+        corr, why = check_order(np.array(levels), want[1:], opts.min_correlation)
+    else:
+        corr, why = check_order(np.r_[np.mean(level[marker[0] : marker[1]]), levels], want, opts.min_correlation)
     if why:
         raise SegmentError(f"{name}: over the frames {ref} split, {why}")
     notes = [f"{name}: {trimmed} frame(s) at the edges of the ranges left out (a transition seen a frame later)"] \

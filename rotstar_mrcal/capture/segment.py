@@ -65,6 +65,11 @@ the panel scans out). Segmentation, step by step:
 9. of the loops that pass, the one with the most frames averaged per
    stretch (then the least motion) is used.
 
+When no loop between two start markers is usable, segment() (method
+'auto') splits the recording by the content of the displayed frames instead
+(capture.content): any window of the loop that shows every frame once,
+short holds, camera frames that blend two displayed frames left out.
+
 A doubled display frame (held twice as long) is one longer stretch; a
 recording that starts or ends mid-loop leaves incomplete loops that are
 skipped. Failures raise SegmentError with a one-line reason; Segmentation
@@ -83,94 +88,13 @@ import numpy as np
 from rotstar_mrcal.pattern.loop import expected_levels, player_loop
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.capture.motion import difference_signal, image_shift, noise_floor, screen_pixels
-
-
-class SegmentError(Exception):
-    """The recording cannot be split into the pattern's frames; the message says why"""
-
-
-@dataclasses.dataclass(frozen=True)
-class Options:
-    step: int = 4  # area downsampling of the difference signal
-    k: float = 6.0  # threshold: median + k robust sigmas ...
-    ratio: float = 3.0  # ... and at least ratio x the median
-    min_len: int = 4  # camera frames in the shortest stable stretch
-    guard: int = 1  # frames dropped at each end of a stretch
-    average: int = 8  # middle frames averaged per stretch
-    min_average: int = 2  # fewer frames left after the guards: the stretch is too short
-    max_motion: float = 0.5  # px, drift over one loop
-    min_correlation: float = 0.9  # recorded vs expected levels of a loop
-    min_still: float = 0.3  # fraction of frames in stable stretches
-    max_jitter: float = 5.0  # frames of a stretch may differ by this many times the sensor noise
-
-
-@dataclasses.dataclass
-class Stretch:
-    start: int  # first frame
-    stop: int  # one past the last frame
-    core: tuple[int, int]  # the frames averaged
-    level: float  # mean level of the core, fraction of full scale
-    truncated: bool  # touches the start or the end of the recording
-
-    @property
-    def length(self) -> int:
-        return self.stop - self.start
-
-
-@dataclasses.dataclass
-class LoopVerdict:
-    marker: int  # index of its start marker in the stretch list
-    stretches: list[int]  # stretch index of every loop entry (marker first), if complete
-    ok: bool
-    reason: str  # why rejected, or ''
-    correlation: float = math.nan
-    motion_px: float = math.nan
-    min_average: int = 0
-
-
-@dataclasses.dataclass
-class Segmentation:
-    images: dict[str, np.ndarray]  # pattern.json file -> (H, W) float64 average, recorded units
-    ranges: dict[str, tuple[int, int]]  # pattern.json file -> frames averaged [a, b)
-    stretches: list[Stretch]
-    markers: np.ndarray  # (nstretch,) bool
-    loops: list[LoopVerdict]
-    chosen: int  # index into loops
-    d: np.ndarray  # the difference signal
-    level: np.ndarray  # per-frame mean level
-    tau: float
-    mask: np.ndarray | None = None  # the downsampled pixels d and level average over (None: all)
-
-    @property
-    def loop(self) -> LoopVerdict:
-        return self.loops[self.chosen]
-
-    def summary(self) -> str:
-        lv = self.loop
-        n_ok = sum(v.ok for v in self.loops)
-        return (f"{len(self.stretches)} stretches, {len(self.loops)} loop(s) seen, {n_ok} usable; using the one "
-                f"starting at frame {self.stretches[lv.marker].start}: >= {lv.min_average} frames averaged per "
-                f"pattern frame, drift {lv.motion_px:.2f} px, level correlation {lv.correlation:.3f}")
+from rotstar_mrcal.capture.segment_base import (  # noqa: F401  (re-exported: the types segmentation returns)
+    LoopVerdict, Options, Segmentation, SegmentError, Stretch, _mean, check_order, threshold,
+)
+from rotstar_mrcal.capture.content import segment_content
 
 
 # ---- the steps -------------------------------------------------------------------
-def threshold(d: np.ndarray, k: float = 6.0, ratio: float = 3.0) -> float:
-    """Robust threshold separating the noise floor of d from the changes
-
-    SYNOPSIS
-
-        >>> d = np.r_[np.nan, np.full(50, 0.01), 0.2, np.full(50, 0.01)]
-        >>> round(threshold(d), 3)
-        0.03
-    """
-    v = d[np.isfinite(d)]
-    if len(v) == 0:
-        raise SegmentError("the recording has fewer than two frames")
-    med = float(np.median(v))
-    mad = float(np.median(np.abs(v - med))) * 1.4826
-    return med + max(k * mad, (ratio - 1) * med, 1e-9)
-
-
 def stable_runs(d: np.ndarray, tau: float, min_len: int) -> list[tuple[int, int]]:
     """[start, stop) of the maximal runs of frames joined by d < tau, at least min_len long
 
@@ -234,27 +158,6 @@ def find_markers(levels: np.ndarray, n_loop: int, min_gap: float = 0.15) -> np.n
     return levels <= srt[i - 1]
 
 
-def check_order(rec: np.ndarray, want: np.ndarray, min_correlation: float) -> tuple[float, str]:
-    """(correlation, '' or why the recorded levels do not follow the expected ones)"""
-    if np.std(rec) == 0 or np.std(want) == 0:
-        return 0.0, "flat levels"
-    r = float(np.corrcoef(rec, want)[0, 1])
-    dw, dr = np.diff(want), np.diff(rec)
-    big = np.abs(dw) > 0.25 * np.ptp(want)
-    wrong = np.flatnonzero(big & (np.sign(dw) != np.sign(dr)))
-    if r < min_correlation:
-        return r, f"levels do not follow pattern.json (correlation {r:.2f} < {min_correlation})"
-    if len(wrong):
-        return r, f"level steps disagree with pattern.json between loop entries {wrong[0]} and {wrong[0] + 1}"
-    return r, ""
-
-
-def _mean(frames, a: int, b: int) -> np.ndarray:
-    acc = np.zeros(np.shape(frames[a]), np.float64)
-    for t in range(a, b):
-        acc += frames[t]
-    return acc / (b - a)
-
 
 def stretch_drift(frames, s: Stretch, guard: int, step: int = 2) -> np.ndarray | None:
     """(dx, dy) per frame (px / frame) between a stretch's first and second half, or None"""
@@ -299,8 +202,30 @@ def judge_loop(frames, stretches: list[Stretch], markers: np.ndarray, i: int, n_
 
 
 def segment(frames, frames_list: list[dict], layout: Layout, full_scale: float,
-            opts: Options = Options()) -> Segmentation:
-    """Split a recording (T, H, W) into the frames of pattern.json; see the module docstring"""
+            opts: Options = Options(), times: np.ndarray | None = None) -> Segmentation:
+    """Split a recording (T, H, W) into the frames of pattern.json; see the module docstring
+
+    opts.method 'auto' splits between start markers (segment_loops) and, when
+    no loop is usable, by content (capture.content: any window of the loop,
+    short holds); the error then gives both reasons. times: (T,) seconds of
+    each camera frame, for the content method (None: one unit per frame).
+    """
+    if opts.method == "content":
+        return segment_content(frames, frames_list, layout, full_scale, opts, times)
+    try:
+        return segment_loops(frames, frames_list, layout, full_scale, opts)
+    except SegmentError as e:
+        if opts.method != "auto":
+            raise
+        try:
+            return segment_content(frames, frames_list, layout, full_scale, opts, times)
+        except SegmentError as e2:
+            raise SegmentError(f"{e}; by content: {e2}") from None
+
+
+def segment_loops(frames, frames_list: list[dict], layout: Layout, full_scale: float,
+                  opts: Options = Options()) -> Segmentation:
+    """Split a recording (T, H, W) into the frames of pattern.json between start markers (the module docstring)"""
     loop = player_loop(frames_list)
     n_frames = len(frames_list)
     need = len(loop) * opts.min_len  # one whole loop: every entry still for min_len frames

@@ -31,8 +31,9 @@ from rotstar_mrcal.atomic import allocated_npy, atomic_path, atomic_write
 from rotstar_mrcal.detect.display_offsets import DisplayCheck, dataset_offsets
 from rotstar_mrcal.vnl import mrcal_keeps, mrcal_min_corners
 from rotstar_mrcal.capture import coverage
-from rotstar_mrcal.capture.motion import difference_signal, downsample, is_still, screen_pixels
+from rotstar_mrcal.capture.motion import difference_signal, downsample, is_still, noise_floor, screen_pixels
 from rotstar_mrcal.capture.pose import quick_check, value_scale, write_segmented
+from rotstar_mrcal.capture.content import agreeing_fraction
 from rotstar_mrcal.capture.segment import Options, SegmentError, segment, threshold
 from rotstar_mrcal.capture.source import CaptureError, FrameSource, record
 
@@ -41,6 +42,8 @@ from rotstar_mrcal.capture.source import CaptureError, FrameSource, record
 class SessionOptions:
     segment: Options = dataclasses.field(default_factory=Options)
     keep_raw: bool = False  # keep OUT/raw/<pose>.npy (+ .json) after segmentation
+    until_enough: int = 0  # > 0: record this many frames, then more (a third as many at a time) until every frame
+    #                        of pattern.json has opts.segment.min_average clean camera frames, at most nframes
 
 
 @dataclasses.dataclass
@@ -92,12 +95,18 @@ class OutputDataset:
 
 
 def wait_for_new_view(src: FrameSource, tau: float, fps: float, still_s: float, need_motion: bool,
-                      step: int = 4) -> bool:
+                      step: int = 4, by_content: bool = False) -> bool:
     """Read frames until the view has moved (if need_motion) and then stayed still; False at the end
 
     Still and moving are motion.is_still over the last still_s seconds: still
     when 75 % of consecutive frames agree up to noise, moving below 30 %.
+    by_content (the player's short holds, where a still view changes every
+    two or three camera frames): consecutive frames compared as the split by
+    content does (content.agreeing_fraction): still when 30 % agree, moving
+    below 10 %.
     """
+    if by_content:
+        return _wait_by_content(src, fps, still_s, need_motion, step)
     n = max(10, int(round(still_s * (fps or 25))))
     window = collections.deque(maxlen=n + 1)
     moved = not need_motion
@@ -112,6 +121,26 @@ def wait_for_new_view(src: FrameSource, tau: float, fps: float, still_s: float, 
         if not moved and not is_still(d, tau, 0.3):
             moved = True
         elif moved and is_still(d, tau, 0.75):
+            return True
+
+
+def _wait_by_content(src: FrameSource, fps: float, still_s: float, need_motion: bool, step: int) -> bool:
+    n = max(10, int(round(still_s * (fps or 25))))
+    window = collections.deque(maxlen=n + 1)
+    moved = not need_motion
+    while True:
+        f = src.read()
+        if f is None:
+            return False
+        window.append(downsample(f.image, step).ravel() / np.float32(src.full_scale))
+        if len(window) < window.maxlen:
+            continue
+        # the noise of two block means' difference, from within the frame (motion.noise_floor's mean |difference|)
+        sigma = noise_floor(f.image, src.full_scale, step) / 1.128 * np.sqrt(2)
+        agree = agreeing_fraction(np.stack(window), sigma)
+        if not moved and agree < 0.1:
+            moved = True
+        elif moved and agree >= 0.3:
             return True
 
 
@@ -163,8 +192,11 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
         raise CaptureError(str(e)) from None
     try:
         buf[0] = first.image
-        rec = record(src, nframes - 1, out=buf[1:]) if nframes > 1 else None
-        seqnums = np.r_[first.sequence, rec.sequence] if rec else np.array([first.sequence])
+        if opts.until_enough:
+            seqnums = record_until_enough(src, buf, first.sequence, pattern, layout, opts)
+        else:
+            rec = record(src, nframes - 1, out=buf[1:]) if nframes > 1 else None
+            seqnums = np.r_[first.sequence, rec.sequence] if rec else np.array([first.sequence])
         n = len(seqnums)
         if opts.keep_raw:
             buf.flush()
@@ -172,8 +204,12 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
                 json.dump({"sequence": [int(v) for v in seqnums], "fps": src.fps, "exposure_us": ds.exposure,
                            "frames": n}, f)
         short = [f"{ds.what(pose)}: the source ended after {n} of {nframes} frames"] if n < nframes else []
-        out = process_recording(ds, pose, pattern, layout, buf[:n], seqnums, src.full_scale, opts)
+        out = process_recording(ds, pose, pattern, layout, buf[:n], seqnums, src.full_scale, opts, src.fps)
         out.messages[:0] = short
+        if src.fps:  # the time the camera and the screen stood still for this recording
+            secs = (int(seqnums[-1]) - int(seqnums[0]) + 1) / src.fps
+            ds.log[-1]["seconds"] = secs
+            out.messages.append(f"{ds.what(pose)}: {secs:.1f} s at the screen ({n} camera frames)")
         return out
     finally:
         del buf
@@ -181,15 +217,55 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
             os.remove(raw)
 
 
+def enough(frames, seqnums: np.ndarray, pattern: dict, layout, full_scale: float, opts: SessionOptions,
+           fps: float) -> bool:
+    """Every frame of pattern.json split off with at least opts.segment.min_average clean camera frames"""
+    try:
+        seg = segment(frames, pattern["frames"], layout, full_scale, opts.segment,
+                      times=np.asarray(seqnums) / fps if fps else None)
+    except SegmentError:
+        return False
+    counts = [len(u) for u in seg.used.values()] if seg.used else \
+        [b - a for a, b in seg.ranges.values()]
+    return min(counts) >= opts.segment.min_average
+
+
+def record_until_enough(src: FrameSource, buf, first_seq: int, pattern: dict, layout, opts: SessionOptions) -> np.ndarray:
+    """Record into buf (buf[0] holds the first frame) until enough() or buf is full; the sequence numbers
+
+    The first look is opts.until_enough frames, then a third of that at a
+    time. (While a look is split, a camera's driver may drop frames: they
+    are gaps in the sequence numbers, which segmentation takes as time.)
+    """
+    seq = [first_seq]
+    want = min(opts.until_enough, len(buf))
+    while True:
+        n = len(seq)
+        if want > n:
+            try:
+                got = record(src, want - n, out=buf[n:want]).sequence.tolist()
+            except CaptureError:  # the source has nothing left
+                got = []
+            seq += got
+            if len(got) < want - n:  # it ended: what there is
+                break
+        if len(seq) >= len(buf) or enough(buf[:len(seq)], np.array(seq), pattern, layout, src.full_scale, opts,
+                                          src.fps):
+            break
+        want = min(len(buf), len(seq) + max(1, opts.until_enough // 3))
+    return np.array(seq)
+
+
 def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frames: np.ndarray, seqnums: np.ndarray,
-                      full_scale: float, opts: SessionOptions) -> PoseOutcome:
-    """Segment, check and write one recording into ds; see the module doc"""
+                      full_scale: float, opts: SessionOptions, fps: float = 0.0) -> PoseOutcome:
+    """Segment, check and write one recording into ds; see the module doc (fps: the camera's, 0 if unknown)"""
     so = opts.segment
     entry = {"pose": pose, "exposure_us": ds.exposure, "frames": len(frames),
              "dropped": int(np.sum(np.maximum(np.diff(seqnums) - 1, 0)))}
     ds.log.append(entry)
     try:
-        seg = segment(frames, pattern["frames"], layout, full_scale, so)
+        seg = segment(frames, pattern["frames"], layout, full_scale, so,
+                      times=np.asarray(seqnums) / fps if fps else None)
         ds.tau = seg.tau
     except SegmentError as e:
         d, _ = difference_signal(frames, full_scale, so.step, screen_pixels(frames, full_scale, so.step))

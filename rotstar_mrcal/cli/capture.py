@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import os
 import shutil
@@ -24,13 +25,14 @@ from rotstar_mrcal.capture.session import (
     OutputDataset, SessionOptions, capture_one, next_free_pose, wait_for_new_view,
 )
 from rotstar_mrcal.capture.source import CaptureError, ControlError, FrameSource, skip
-from rotstar_mrcal.pattern.loop import player_loop
+from rotstar_mrcal.pattern.loop import entry_holds, player_loop
 from rotstar_mrcal.pattern.player import DEFAULT_HOLD
 from rotstar_mrcal.cli.common import (
     EXIT_FAILED, EXIT_INTERRUPTED, HelpFormatter, atomic_write, check_output_path, exit_status_help, fail,
     out_line, run, say, size_arg,
 )
 from rotstar_mrcal.cli.segment_args import add_segment_options, options_from
+from rotstar_mrcal.cli.common import HOLD_HELP, hold_arg
 
 DESCRIPTION = """\
 Record the display sequence that player.html loops on the screen (the
@@ -177,8 +179,12 @@ def _recording_arguments(p) -> None:
     r.add_argument("--frames", type=int, help="camera frames per recording (default: --loops loops of the player)")
     r.add_argument("--loops", type=float, default=2.2, help="player loops per recording (default 2.2: at least one "
                                                             "whole loop wherever the recording starts)")
-    r.add_argument("--hold", type=int, default=DEFAULT_HOLD, help=f"the player's hold, refreshes (default {DEFAULT_HOLD})")
+    r.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD, help=f"{HOLD_HELP} (default {DEFAULT_HOLD})")
     r.add_argument("--refresh", type=float, default=60.0, help="the screen's refresh rate, Hz (default 60)")
+    r.add_argument("--until-enough", action="store_true",
+                   help="record one loop of the player and two frames, then more, until every frame of pattern.json "
+                        "has two clean camera frames (split by their content); the recording's length "
+                        "(--loops, --frames) is the limit. Says the seconds each pose took")
     r.add_argument("--poses", type=int, default=0, help="stop after this many poses (default: until q or the end of a replay)")
     r.add_argument("--auto", action="store_true",
                    help="start the next pose when the view has moved and then been still for --still seconds")
@@ -246,13 +252,20 @@ def camera_names(rig: RigSource) -> list[str]:
     return out
 
 
-def frames_per_recording(a, n_entries: int, fps: float) -> int:
+def frames_per_recording(a, holds, fps: float) -> int:
+    """--frames, or --loops loops of the player (holds: refreshes of every loop entry, pattern.loop.entry_holds)"""
     if a.frames:
         return a.frames
     if not fps:
         raise CaptureError("the frame rate is unknown (a replay without one): give --frames N or --fps")
-    loop_s = n_entries * a.hold / a.refresh
+    loop_s = int(np.sum(holds)) / a.refresh
     return int(np.ceil(a.loops * loop_s * fps))
+
+
+def first_look(a, pattern: dict, fps: float) -> int:
+    """--until-enough's first recording: one loop of the player and its two longest entries, in camera frames"""
+    holds = entry_holds(player_loop(pattern["frames"]), a.hold)
+    return int(np.ceil((holds.sum() + 2 * holds.max()) / a.refresh * (fps or 25.0)))
 
 
 def default_controls(a) -> tuple[float | None, str]:
@@ -350,10 +363,10 @@ def _main(argv=None, source: FrameSource | None = None) -> int:
     except dataset.DatasetError as e:
         fail(str(e))
     check_output_path(a.out, [dataset.pattern_file(a.pattern)], folder=True)
-    n_entries = len(player_loop(pattern["frames"]))
+    holds = entry_holds(player_loop(pattern["frames"]), a.hold)  # refreshes of every loop entry
     _warn_formats(a)
     src = _open(a, source, a.fps if a.fps else (None if a.backend == "replay" else DEFAULT_FPS))
-    return _session(a, argv, src, pattern, layout, n_entries)
+    return _session(a, argv, src, pattern, layout, holds)
 
 
 def _open(a, source: FrameSource | None, fps):
@@ -391,7 +404,7 @@ def _warn_formats(a) -> None:
             "auto exposure changes the brightness between the player's frames")
 
 
-def _session(a, argv, src, pattern, layout, n_entries: int) -> int:
+def _session(a, argv, src, pattern, layout, holds) -> int:
     """Pose after pose into one dataset per exposure, capture.json after each; the summary; the exit status"""
     rig = isinstance(src, RigSource)
     exposures = a.exposure or [None]
@@ -404,7 +417,7 @@ def _session(a, argv, src, pattern, layout, n_entries: int) -> int:
     interrupted = False
     log = {"format": "rotstar-capture/1", "started": time.strftime("%Y-%m-%d %H:%M:%S"), "argv": sys.argv[1:] if argv is None else list(argv)}
     try:
-        nframes = _start(a, src, log, n_entries)
+        nframes = _start(a, src, log, holds)
         _record_poses(a, src, datasets, pattern, layout, nframes, raw_dir, log)
     except CaptureError as e:
         say(f"rotstar-capture: {e}")
@@ -430,7 +443,7 @@ def _session(a, argv, src, pattern, layout, n_entries: int) -> int:
     return 0 if any(ds.good for ds in datasets) else EXIT_FAILED
 
 
-def _start(a, src, log: dict, n_entries: int) -> int:
+def _start(a, src, log: dict, holds) -> int:
     """The source described, its emitter and gain set, OUT made; the number of frames per recording"""
     log["source"] = src.info()
     say(f"rotstar-capture: {src.name}: " + ", ".join(f"{k} {v}" for k, v in log["source"].items()
@@ -442,8 +455,8 @@ def _start(a, src, log: dict, n_entries: int) -> int:
         got = control(a, f"gain {gain:g}", src.set_gain, gain)
         if got is not False:
             say(f"rotstar-capture: gain {got:g}")
-    nframes = frames_per_recording(a, n_entries, src.fps)
-    say(f"rotstar-capture: {nframes} frames per recording ({a.loops:g} loops of {n_entries} x {a.hold} "
+    nframes = frames_per_recording(a, holds, src.fps)
+    say(f"rotstar-capture: {nframes} frames per recording ({a.loops:g} loops of {int(np.sum(holds))} "
         f"refreshes at {a.refresh:g} Hz)" if not a.frames else f"rotstar-capture: {nframes} frames per recording")
     os.makedirs(a.out, exist_ok=True)
     return nframes
@@ -451,7 +464,8 @@ def _start(a, src, log: dict, n_entries: int) -> int:
 
 def _record_poses(a, src, datasets, pattern, layout, nframes: int, raw_dir: str, log: dict) -> None:
     """Until --poses poses with a board (or the user's q, the recording's end): wait for a view, record it"""
-    opts = SessionOptions(options_from(a), a.keep_raw)
+    opts = SessionOptions(dataclasses.replace(options_from(a), hold=a.hold or 0, refresh_hz=a.refresh), a.keep_raw,
+                          first_look(a, pattern, src.fps) if a.until_enough else 0)
     pose_no = next_free_pose([d.folder for d in datasets])
     src.start()
     taken, tau = 0, None
@@ -484,7 +498,7 @@ def _next_view(a, src, pose: str, nframes: int, tau) -> bool:
         skip(src, a.settle)
     elif tau is not None:  # (the first pose of --auto is recorded at once)
         say(f"rotstar-capture: {pose}: waiting for the view to move and then be still ...")
-        if not wait_for_new_view(src, tau, src.fps, a.still, need_motion=True):
+        if not wait_for_new_view(src, tau, src.fps, a.still, need_motion=True, by_content=a.hold is None):
             say("rotstar-capture: the recording ended")
             return False
     return True

@@ -300,3 +300,23 @@ def check_output_path(path: str, inputs=(), folder: bool = False) -> str:
     return path
 
 
+def hold_arg(s: str) -> int | None:
+    """--hold: refreshes for every frame kind, or 'short' (None: pattern.loop.SHORT_HOLDS, per kind)
+
+    >>> hold_arg("30"), hold_arg("short")
+    (30, None)
+    """
+    if s == "short":
+        return None
+    try:
+        v = int(s)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{s!r}: a number of refreshes >= 1, or 'short'")
+    return v
+
+
+HOLD_HELP = ("the player's hold, display refreshes per frame; 'short' holds each frame kind for its own time "
+             "(the rotating star 9, the identity frames, the checkerboard and the start marker 6: "
+             "pattern.loop.SHORT_HOLDS, a 2.7 s loop of the default sequence at 60 Hz)")

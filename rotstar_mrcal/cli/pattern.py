@@ -10,7 +10,8 @@ import sys
 
 import cv2
 
-from rotstar_mrcal.pattern.player import write_player
+from rotstar_mrcal.pattern.player import DEFAULT_HOLD, write_player
+from rotstar_mrcal.cli.common import HOLD_HELP, hold_arg
 from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.pattern.render import encode_display, render_frame
 from rotstar_mrcal.cli.common import (
@@ -55,6 +56,8 @@ def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-pattern", description=DESCRIPTION, epilog=exit_status_help("written", failed="a frame cannot be written"),
                                 formatter_class=HelpFormatter)
     p.add_argument("--out", "-o", default="pattern", help="output folder (default ./pattern)")
+    p.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD, help=f"player.html's {HOLD_HELP} (default "
+                   f"{DEFAULT_HOLD}; the page's #hold=N changes it)")
     p.add_argument("--screen", type=size_arg, default=(2360, 1640), help="screen size in display pixels (default 2360x1640)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--ppi", type=number_arg(float, 0, lo_open=True), default=264.0, help="display pixels per inch (default 264)")
@@ -127,7 +130,7 @@ def _main(argv=None) -> int:
     with atomic_write(os.path.join(a.out, "pattern.json")) as fh:
         json.dump(d, fh, indent=2)
         fh.write("\n")
-    say(f"wrote {write_player(a.out)}: open it on the screen, full screen (doc/capture.md)")
+    say(f"wrote {write_player(a.out, a.hold)}: open it on the screen, full screen (doc/capture.md)")
     code = layout.identity_code
     say(f"{layout.nx}x{layout.ny} corners, pitch {layout.pitch} px = {layout.spacing_m * 1000:.4f} mm, "
         f"marker element {layout.marker}; {layout.nframes} rotating-star frames, "

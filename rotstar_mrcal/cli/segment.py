@@ -19,6 +19,8 @@ from rotstar_mrcal.capture.rig_segment import RigSegmentation, check_recordings,
 from rotstar_mrcal.capture.segment import SegmentError, segment
 from rotstar_mrcal.capture.source import CaptureError
 from rotstar_mrcal.cli.segment_args import add_segment_options, options_from
+from rotstar_mrcal.cli.common import HOLD_HELP, hold_arg
+from rotstar_mrcal.pattern.player import DEFAULT_HOLD
 from rotstar_mrcal.atomic import whole_or_none
 from rotstar_mrcal.cli.common import (
     EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, exit_status_help, fail,
@@ -89,6 +91,10 @@ def parse_args(argv=None):
                         "or the first that can be split)")
     p.add_argument("--force", action="store_true", help="overwrite a pose folder that already holds frames")
     add_segment_options(p)
+    p.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD,
+                   help=f"{HOLD_HELP} (default {DEFAULT_HOLD}); used to tell the frames apart by their content when "
+                        f"no whole loop between two start markers was recorded")
+    p.add_argument("--refresh", type=float, default=60.0, help="the screen's refresh rate, Hz (default 60)")
     return p.parse_args(argv)
 
 
@@ -102,7 +108,8 @@ def plot_signal(fn: str, seg, title: str) -> None:
     fig, ax = plt.subplots(figsize=(12, 4))
     ax.semilogy(seg.d, lw=0.8, color="k", label="mean |difference| (fraction of full scale)")
     ax.axhline(seg.tau, color="r", lw=0.8, label="threshold")
-    used = set(seg.loop.stretches)
+    # between markers: the stretches of the loop used; by content: every clean visit of a frame is averaged
+    used = set(range(len(seg.stretches))) if seg.method == "content" else set(seg.loop.stretches)
     for k, s in enumerate(seg.stretches):
         colour = "tab:purple" if seg.markers[k] else "tab:green" if k in used else "tab:gray"
         ax.axvspan(s.start, s.stop - 0.5, color=colour, alpha=0.15, lw=0)
@@ -219,10 +226,10 @@ def split(a, cams: list, pattern: dict, layout, names: list[str]):
     try:
         if names:
             rs = segment_rig([c.frames for c in cams], pattern["frames"], layout, [c.full_scale for c in cams],
-                             options_from(a), a.reference, names)
+                             _options(a), a.reference, names)
         else:
             rs = RigSegmentation([segment(cams[0].frames, pattern["frames"], layout, cams[0].full_scale,
-                                          options_from(a))], 0, [])
+                                          _options(a), times=_times(cams[0]))], 0, [])
     except SegmentError as e:
         fail(str(e) if names else f"{a.recording[0]}: {e}", EXIT_FAILED)
     except CaptureError as e:
@@ -234,6 +241,16 @@ def split(a, cams: list, pattern: dict, layout, names: list[str]):
     for n in rs.notes:
         say(f"rotstar-segment: note: {n}")
     return rs
+
+
+def _options(a):
+    """The segmentation options, with the player's hold and refresh rate"""
+    return dataclasses.replace(options_from(a), hold=a.hold or 0, refresh_hz=a.refresh)
+
+
+def _times(c) -> np.ndarray | None:
+    """Seconds of every camera frame (sequence numbers / fps), None when the recording has no frame rate"""
+    return np.asarray(c.sequence) / c.fps if c.fps else None
 
 
 def write_camera(a, out: str, name: str, c, seg, pattern: dict, layout, reference: str) -> str:
@@ -288,6 +305,7 @@ class CameraRecording:
     full_scale: float
     sequence: np.ndarray
     notes: list
+    fps: float = 0.0  # the camera's frame rate, if the recording says (0: unknown)
 
 
 def load_cameras(a, names: list[str]) -> list[CameraRecording]:
@@ -323,7 +341,8 @@ def load_recording(a, fn: str, rig: bool) -> CameraRecording:
     frames = src.frames()
     if rig and hasattr(frames, "check_sizes"):
         frames.check_sizes()
-    return CameraRecording(os.path.abspath(fn), frames, src.full_scale, src.sequence_numbers(), src.notes)
+    return CameraRecording(os.path.abspath(fn), frames, src.full_scale, src.sequence_numbers(), src.notes,
+                           src.fps or 0.0)
 
 
 if __name__ == "__main__":

@@ -42,7 +42,8 @@ from rotstar_mrcal.optics.refraction import DEFAULT_INDEX
 from rotstar_mrcal.optics.psf import LensPSF
 from rotstar_mrcal.simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_dataset
 from rotstar_mrcal.simulate.screen import exact_frames, png_frames, shown_light
-from rotstar_mrcal.capture.simulated import write_player_recording
+from rotstar_mrcal.cli.common import HOLD_HELP, hold_arg
+from rotstar_mrcal.capture.simulated import ALL_FLAWS, Flaws, write_player_recording
 from rotstar_mrcal.pattern.player import DEFAULT_HOLD
 from rotstar_mrcal.cli.common import (
     EXIT_CODES_HELP, EXIT_FAILED, HelpFormatter, check_output_path, fail, number_arg, out_line, run,
@@ -227,13 +228,17 @@ def _recording_arguments(p) -> None:
                    help="write what a camera records while player.html loops, pose after pose (still for --loops "
                         "loops and a bit, then moving for a second), as REC.npy + REC.json: the recording that "
                         "rotstar-segment and rotstar-capture --backend replay read; no ground truth, no --out")
-    r.add_argument("--hold", type=number_arg(int, 1), default=DEFAULT_HOLD,
-                   help="the player's hold, refreshes per frame (give rotstar-capture the same --hold)")
+    r.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD,
+                   help=f"{HOLD_HELP} (default {DEFAULT_HOLD}; give rotstar-capture the same --hold)")
     r.add_argument("--refresh", type=number_arg(float, 0, lo_open=True), default=60.0, help="screen refresh rate, Hz")
     r.add_argument("--fps", type=number_arg(float, 0, lo_open=True), default=25.0, help="camera frame rate")
     r.add_argument("--loops", type=number_arg(float, 0, lo_open=True), default=2.2,
                    help="loops of the player per pose that rotstar-capture records (its --loops); each pose is "
                         "still for 1 s + this + 1 loops")
+    r.add_argument("--timing-flaws", action="store_true",
+                   help="the display's and the camera's timing flaws on (capture.simulated.ALL_FLAWS: a 5 ms LCD "
+                        "response, a 480 Hz PWM backlight, the browser a refresh late or early now and then, 1 %% "
+                        "of the camera's frames lost, its clock 200 ppm fast)")
 
 
 def _check_recording(p, args) -> None:
@@ -379,19 +384,20 @@ def _recording(args, layout, model, camera: str, encoded: float, say) -> int:
         rts = random_poses(model, layout, args.poses, np.random.default_rng([0, args.seed]), distance=distance,
                            max_tilt_deg=args.max_tilt, margin_px=args.margin)
         W, H = (int(v) for v in model.imagersize())
-        say(f"a recording of the player (hold {args.hold} at {args.refresh:g} Hz) by camera {camera} {W}x{H} at "
+        say(f"a recording of the player (hold {args.hold or 'short'} at {args.refresh:g} Hz) by camera {camera} {W}x{H} at "
             f"{args.fps:g} fps, {args.poses} pose(s)")
         n = write_player_recording(
             args.recording, layout, model, rts, hold=args.hold, refresh_hz=args.refresh, fps=args.fps,
             loops=args.loops, gain=args.gain, noise=args.noise, bits=args.bits, room=args.room,
             supersample=args.supersample, psf=args.blur if args.seidel is None else LensPSF(args.seidel, (W, H)),
-            frames=screen_frames(args, layout, encoded), seed=args.seed, progress=say)
+            frames=screen_frames(args, layout, encoded), seed=args.seed, progress=say,
+            flaws=ALL_FLAWS if args.timing_flaws else Flaws())
     except (DatasetError, ValueError, RuntimeError) as e:
         fail(f"error: {e}", EXIT_FAILED)
     except OSError as e:  # a full disk: the file is removed
         fail(str(e) if not e.filename else f"{e.filename}: {e.strerror}", EXIT_FAILED)
     say(f"{args.recording}: {n} frames; next: rotstar-capture --backend replay --device {args.recording} "
-        f"--pattern {args.pattern} --hold {args.hold} --loops {args.loops:g} --auto --out seq/")
+        f"--pattern {args.pattern} --hold {args.hold or 'short'} --loops {args.loops:g} --auto --out seq/")
     out_line(args.recording)
     return 0
 

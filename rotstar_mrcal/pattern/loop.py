@@ -91,6 +91,34 @@ def frame_level(layout: Layout, frame: dict) -> float:
     return float(np.mean(render_frame(layout, frame)))
 
 
+SHORT_HOLDS = {"rotstar": 9, "identity": 6, "checkerboard": 6, "start-marker": 6}
+"""Display refreshes per frame kind for a short capture (60 Hz): measured with the capture's simulated camera,
+every timing flaw on (tests/capture/test_timing_flaws.py): at 25 fps with 8 ms exposures, 6 refreshes (100 ms)
+give two consecutive clean camera frames of an entry in 96 % of the passes (5: 65 %, 4: 29 %), at 30 fps 97 %
+(5: 95 %); the rotating-star frames, which the corners are measured on, get 9 (150 ms, about three clean camera
+frames at 25 fps). One loop of the default sequence: 8 x 9 + 13 x 6 + 6 + 6 = 162 refreshes, 2.7 s."""
+
+
+def entry_holds(loop: list[dict], hold: int | None = None, kind_holds: dict | None = None,
+                marker_hold: int | None = None) -> np.ndarray:
+    """(len(loop),) display refreshes each loop entry is held
+
+    hold: every kind's hold (None: SHORT_HOLDS per kind, hold 9 for kinds it
+    does not list); kind_holds: {kind: refreshes} over that; marker_hold: the
+    start marker's (None: as its kind says).
+
+    >>> loop = player_loop([{"file": "a", "kind": "rotstar"}, {"file": "b", "kind": "identity"}])
+    >>> entry_holds(loop, 30).tolist(), entry_holds(loop).tolist(), entry_holds(loop, 30, {"identity": 6}, 45).tolist()
+    ([30, 30, 30], [6, 9, 6], [45, 30, 6])
+    """
+    base = dict(SHORT_HOLDS) if hold is None else {}
+    base.update(kind_holds or {})
+    if marker_hold:
+        base["start-marker"] = marker_hold
+    default = SHORT_HOLDS["rotstar"] if hold is None else hold
+    return np.array([int(base.get(e["kind"], default)) for e in loop])
+
+
 def expected_levels(layout: Layout, loop: list[dict]) -> np.ndarray:
     """(len(loop),) mean linear luminance of every loop entry"""
     return np.array([frame_level(layout, e) for e in loop])

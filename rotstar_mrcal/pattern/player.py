@@ -21,7 +21,9 @@ can be copied or served alone. The page
   size in device pixels and whose CSS size is that divided by
   devicePixelRatio: a raw pixel copy, no scaling, no smoothing;
 - advances in requestAnimationFrame, holding each loop entry for `hold`
-  display refreshes (the start marker for `marker_hold`);
+  display refreshes (the start marker for `marker_hold`, a frame kind listed
+  in kind_holds for its own: the identity frames can be held shorter than
+  the rotating star, pattern.loop.SHORT_HOLDS);
 - opens on a check screen: 1-px stripes and checkers that turn grey or show
   beats when the mapping is not 1:1, a one-pixel frame around the screen
   edge that shows cropping, the measured refresh rate, and a warning that
@@ -33,7 +35,8 @@ can be copied or served alone. The page
   the screen or the arrow keys step, the middle third or Space resumes; R
   restarts at the start marker, C or a long press returns to the check
   screen, F toggles full screen, + / - change the hold on the check screen.
-  URL options: #hold=N&markerhold=N&play.
+  URL options: #hold=N&markerhold=N&play; #hold=N holds every kind N
+  refreshes, #identityhold=N (any kind + "hold") one kind.
 
 For tests and remote control the page exposes window.rotstar: ready (a
 Promise), show(k) (pause on loop entry k), check(), play(), status().
@@ -48,24 +51,29 @@ import os
 
 from rotstar_mrcal.atomic import atomic_write
 from rotstar_mrcal.pattern.layout import layout_from_dict
-from rotstar_mrcal.pattern.loop import player_loop
+from rotstar_mrcal.pattern.loop import SHORT_HOLDS, entry_holds, player_loop
 
 TEMPLATE = "player_template.html"
 DEFAULT_HOLD = 30
 """Display refreshes per loop entry: 0.5 s at 60 Hz, 12 frames of a 25 fps camera"""
 
 
-def player_config(pattern: dict, pngs: dict[str, bytes], hold: int = DEFAULT_HOLD,
-                  marker_hold: int | None = None) -> dict:
+def player_config(pattern: dict, pngs: dict[str, bytes], hold: int | None = DEFAULT_HOLD,
+                  marker_hold: int | None = None, kind_holds: dict | None = None) -> dict:
     """The page's configuration: screen size, loop, hold times, embedded PNGs
 
     pattern: the pattern.json dictionary; pngs: {file name: PNG bytes} for
-    every frame of pattern["frames"].
+    every frame of pattern["frames"]. Hold times as pattern.loop.entry_holds
+    takes them: hold for every kind (None: loop.SHORT_HOLDS per kind),
+    kind_holds {kind: refreshes} over it, marker_hold for the start marker.
     """
     layout = layout_from_dict(pattern)
-    if hold < 1 or (marker_hold is not None and marker_hold < 1):
-        raise ValueError("hold times must be at least one display refresh")
     loop = player_loop(pattern["frames"])
+    holds = entry_holds(loop, hold, kind_holds, marker_hold)
+    if holds.min() < 1:
+        raise ValueError("hold times must be at least one display refresh")
+    general = SHORT_HOLDS["rotstar"] if hold is None else int(hold)
+    by_kind = {e["kind"]: int(h) for e, h in zip(loop[1:], holds[1:]) if h != general}
     for e in loop[1:]:
         if e["file"] not in pngs:
             raise ValueError(f"{e['file']}: no PNG for this frame of pattern.json")
@@ -73,8 +81,9 @@ def player_config(pattern: dict, pngs: dict[str, bytes], hold: int = DEFAULT_HOL
         "format": "rotstar-player/1",
         "width": layout.screen_width,
         "height": layout.screen_height,
-        "hold": int(hold),
-        "markerHold": int(marker_hold or hold),
+        "hold": general,
+        "markerHold": int(holds[0]),
+        "kindHolds": by_kind,
         "loop": [
             {
                 "kind": e["kind"],
@@ -96,8 +105,8 @@ def render_player(config: dict) -> str:
     return template.replace("/*ROTSTAR-CONFIG*/", blob)
 
 
-def write_player(folder: str, hold: int = DEFAULT_HOLD, marker_hold: int | None = None,
-                 name: str = "player.html") -> str:
+def write_player(folder: str, hold: int | None = DEFAULT_HOLD, marker_hold: int | None = None,
+                 name: str = "player.html", kind_holds: dict | None = None) -> str:
     """Write folder/player.html from folder/pattern.json and the frame PNGs beside it"""
     with open(os.path.join(folder, "pattern.json")) as f:
         pattern = json.load(f)
@@ -107,5 +116,5 @@ def write_player(folder: str, hold: int = DEFAULT_HOLD, marker_hold: int | None 
             pngs[fr["file"]] = f.read()
     fn = os.path.join(folder, name)
     with atomic_write(fn, encoding="utf-8") as f:
-        f.write(render_player(player_config(pattern, pngs, hold, marker_hold)))
+        f.write(render_player(player_config(pattern, pngs, hold, marker_hold, kind_holds)))
     return fn

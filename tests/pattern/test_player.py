@@ -413,3 +413,36 @@ def test_paper_sequence_pixel_exact(ipad_paper, browsers):
     for k in range(22, 32):
         assert b.evaluate(f"rotstar.show({k})")
         assert_gray_equal(b.screenshot(), want[k], f"loop entry {k} ({st['files'][k]})")
+
+
+def test_playback_holds_per_kind(tmp_path, browsers):
+    """The identity frames held shorter than the rotating star (the config's kind holds, and from the URL)"""
+    from rotstar_mrcal.pattern.layout import make_layout
+    from rotstar_mrcal.pattern.loop import entry_holds
+
+    layout = make_layout(screen=(480, 420), pitch=60, band=16)
+    d = layout.to_dict()
+    blank = cv2.imencode(".png", np.zeros((420, 480), np.uint8))[1].tobytes()
+    html = render_player(player_config(d, {f["file"]: blank for f in d["frames"]}, hold=None))  # SHORT_HOLDS
+    b = browsers(1)
+    b.emulate(480, 420, 1)
+    for k, (url, want) in enumerate((("#play", entry_holds(player_loop(d["frames"]))),
+                                     ("#play&hold=4&identityhold=2",
+                                      entry_holds(player_loop(d["frames"]), 4, {"identity": 2}, 6)))):
+        (tmp_path / f"p{k}.html").write_text(html)  # (another file: a new hash alone does not load the page)
+        st = b.load((tmp_path / f"p{k}.html").as_uri() + url)
+        assert st["holds"] == want.tolist(), (url, st["holds"])
+        n = st["entries"]
+        seq = b.evaluate(f"""new Promise(done => {{
+            const out = []; const f = () => {{ out.push(rotstar.status().pos);
+              if (out.length < {2 * int(want.sum()) + 20}) requestAnimationFrame(f); else done(out); }};
+            requestAnimationFrame(f); }})""")
+        runs = []
+        for p in seq:
+            if runs and runs[-1][0] == p:
+                runs[-1][1] += 1
+            else:
+                runs.append([p, 1])
+        inner = runs[1:-1]
+        assert len(inner) >= n
+        assert all(length == want[p] for p, length in inner), (url, runs)
