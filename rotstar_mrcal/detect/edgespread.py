@@ -364,8 +364,11 @@ PSF_MIN_WINDOW = 4.0  # px: a corner with a smaller half-window keeps the symmet
 MAX_CENTROID_STEP = 1.0  # px: a centroid farther than this from the symmetric corner is not believed
 
 
-def smooth_field(xy: np.ndarray, values: np.ndarray, degree: int = 2, clip: float = 3.0, weights=None) -> np.ndarray:
+def smooth_field(xy: np.ndarray, values: np.ndarray, degree: int = 2, clip: float = 3.0, weights=None,
+                 at=None) -> np.ndarray:
     """(N, 2) values (N, 2) at points xy (N, 2) replaced by a polynomial of x, y fitted to them (robustly)
+
+    at: (M, 2) other points to evaluate the polynomial at, (M, 2) returned.
 
     Least squares on the monomials up to `degree` (coordinates scaled to the
     points' extent; weights (N,): relative, e.g. 1 / variance), refitted once
@@ -381,11 +384,16 @@ def smooth_field(xy: np.ndarray, values: np.ndarray, degree: int = 2, clip: floa
     if not len(v):
         return v.copy()
     c, s = xy.mean(axis=0), np.maximum(np.ptp(xy, axis=0) / 2, 1e-9)
-    x, y = ((xy - c) / s).T
-    A = np.stack([x ** i * y ** j for i in range(degree + 1) for j in range(degree + 1 - i)], -1)
+
+    def monomials(p):
+        x, y = ((np.asarray(p, float) - c) / s).T
+        return np.stack([x ** i * y ** j for i in range(degree + 1) for j in range(degree + 1 - i)], -1)
+
+    A = monomials(xy)
+    B = A if at is None else monomials(at)
     wt = np.ones(len(v)) if weights is None else np.asarray(weights, float)
     if len(v) < 2 * A.shape[1]:
-        return np.broadcast_to((wt[:, None] * v).sum(axis=0) / wt.sum(), v.shape).copy()
+        return np.broadcast_to((wt[:, None] * v).sum(axis=0) / wt.sum(), (len(B), 2)).copy()
     keep = np.ones(len(v), bool)
     sw = np.sqrt(wt)[:, None]
     for _ in range(2):
@@ -393,7 +401,7 @@ def smooth_field(xy: np.ndarray, values: np.ndarray, degree: int = 2, clip: floa
         r = np.linalg.norm(v - A @ coef, axis=1) * sw[:, 0]
         sigma = 1.4826 * np.median(r[keep]) + 1e-12
         keep = r <= clip * sigma
-    return A @ coef
+    return B @ coef
 
 
 def psf_correct(frames, corners, window, shifts=None, min_window: float = PSF_MIN_WINDOW, rounds: int = 1,
@@ -401,19 +409,22 @@ def psf_correct(frames, corners, window, shifts=None, min_window: float = PSF_MI
     """(N, 2) corners moved from the symmetric fit's point toward the light's centroid where the window allows
 
     The centroid is where the 16 edges, each placed at its line-spread
-    function's mean, meet (local_psf). A corner whose half-window is below
-    min_window (the edges too short to hold the PSF's spread), whose edges
-    are not all measured, or whose centroid is more than MAX_CENTROID_STEP
-    away keeps the corner given; NaN corners stay NaN. pool: the steps of
-    the corners of one call (one pose) are replaced by a smooth field over
-    the image (smooth_field of `degree`, weighted by the steps' inverse
-    variance when `weighted`): the symmetric fit's offset from the centroid
-    varies slowly with the PSF, while each corner's own step carries the
-    noise of its edges' first moments. Measured on 4 near D435 views
-    (windows 3-8 px, benchmark.psfcheck; RMS against the centroid truth):
-    coma 2.5 waves: symmetric 0.0609 px, each corner's own step 0.0539,
-    pooled (degree 1, weighted) 0.0532; Gaussian PSF of 1 px: 0.0049, 0.0072,
-    0.0050 (degree 2: 0.0532 and 0.0052).
+    function's mean, meet (local_psf). Corners whose half-window is below
+    min_window (the edges too short to hold the PSF's spread) keep the corner
+    given; NaN corners stay NaN. A corner's own step counts when all but two
+    of its edges were measured and it is at most MAX_CENTROID_STEP long.
+    pool False: those corners move by their own step. pool True (default):
+    the counted steps of the call (one pose) are fitted by a smooth field
+    over the image (smooth_field of `degree`, weighted by the steps' inverse
+    variance when `weighted`), which moves every corner of min_window or more:
+    the symmetric fit's offset from the centroid varies slowly with the PSF,
+    while each corner's own step carries the noise of its edges' first
+    moments. Measured on 4 near D435 views (windows 3-8 px,
+    benchmark.psfcheck; RMS against the centroid truth, all corners): coma
+    2.5 waves: symmetric 0.0609 px, own steps 0.0539, pooled (degree 1,
+    weighted) 0.0502; coma 1.5: 0.0345, -, 0.0277; Gaussian PSF of 1 px:
+    0.0049, 0.0072, 0.0051. Pooled but moving only the counted corners:
+    0.0532, 0.0303, 0.0050; degree 2: 0.0532 and 0.0052 (counted only).
 
     >>> yy, xx = np.mgrid[0:40, 0:40] - np.array([20.3, 19.6])[:, None, None]
     >>> frames = np.stack([np.tanh((np.cos(t) * xx + np.sin(t) * yy))
@@ -431,15 +442,22 @@ def psf_correct(frames, corners, window, shifts=None, min_window: float = PSF_MI
     sh = None if shifts is None else np.asarray(shifts, float)[:, use]
     _, est = local_psf(frames, q[use], w[use], sh, rounds=rounds)
     step = est.centroid
-    good = (est.edges >= 2 * len(np.atleast_3d(frames)) - 2) & (np.linalg.norm(step, axis=1) <= MAX_CENTROID_STEP)
+    nframes = 1 if np.ndim(frames) == 2 else len(frames)
+    good = (est.edges >= 2 * nframes - 2) & (np.linalg.norm(step, axis=1) <= MAX_CENTROID_STEP)
     at = np.flatnonzero(use)[good]
+    if not pool:
+        out[at] += step[good]
+        return out
+    if not good.any():
+        return out
     wt = 1 / np.maximum(np.trace(est.centroid_cov[good], axis1=1, axis2=2), 1e-8) if weighted else None
-    out[at] += smooth_field(q[at], step[good], degree, weights=wt) if pool else step[good]
+    out[use] += smooth_field(q[at], step[good], degree, weights=wt, at=q[use])
     return out
 
 
-BLUR_FIELDS = ("width", "width_sd", "elongation", "elongation_deg", "coma", "coma_sd", "coma_deg")
-"""The blur map's columns per corner: px, px, 1, degrees of the long axis, px^3, px^3, degrees of the tail"""
+BLUR_FIELDS = ("width", "width_sd", "elongation", "elongation_deg", "coma", "coma_sd", "coma_deg", "reach")
+"""The blur map's columns per corner: px, px, 1, degrees of the long axis, px^3, px^3, degrees of the tail,
+and the reach (px) the PSF was clipped to"""
 
 
 def blur_columns(frames, corners, window, min_window: float = PSF_MIN_WINDOW) -> np.ndarray:
@@ -449,15 +467,15 @@ def blur_columns(frames, corners, window, min_window: float = PSF_MIN_WINDOW) ->
     >>> frames = np.stack([np.tanh((np.cos(t) * xx + np.sin(t) * yy))
     ...                    * np.tanh((-np.sin(t) * xx + np.cos(t) * yy)) for t in np.arange(8) * np.pi / 16])
     >>> b = blur_columns(frames, np.array([[19.6, 20.3], [19.6, 20.3]]), np.array([8.0, 3.0]))
-    >>> b.shape, bool(0.5 < b[0, 0] < 1.0), bool(np.isnan(b[1]).all())
-    ((2, 7), True, True)
+    >>> b.shape, bool(0.5 < b[0, 0] < 1.0), bool(np.isnan(b[1]).all()), float(b[0, 7])
+    ((2, 8), True, True, 3.5)
     """
     q = np.asarray(corners, float).reshape(-1, 2)
     w = np.broadcast_to(np.asarray(window, float), (len(q),))
     out = np.full((len(q), len(BLUR_FIELDS)), np.nan)
     use = np.isfinite(q).all(axis=1) & (w >= min_window)
     if use.any():
-        _, e = local_psf(frames, q[use], w[use])
+        es, e = local_psf(frames, q[use], w[use])
         out[use] = np.column_stack((e.width, e.width_sd, e.elongation, np.degrees(e.elongation_angle),
-                                    e.coma, e.coma_sd, np.degrees(e.coma_angle)))
+                                    e.coma, e.coma_sd, np.degrees(e.coma_angle), es.reach))
     return out
