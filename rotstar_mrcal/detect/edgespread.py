@@ -46,9 +46,13 @@ the pixels within `reach` of the edge and at least `reach` from the other
 cancel), binned every BIN_PX along n; the moments as integrals of the ESF F
 against a smooth reference CDF R whose moments are known,
 E[X^j] = E_R[X^j] + integral of j u^(j-1) (R(u) - F(u)) du over [-L, L],
-L = reach. A PSF
-wider than the reach is truncated there: the moments are those of the PSF
-within +-reach of the corner, and the centroid that of that light.
+L = reach. A PSF wider than the reach is truncated there: the moments are
+those of the PSF clipped to +-reach, and the centroid that of that light.
+
+Uses: psf_correct (rotstar-detect --refine psf: the symmetric fit's corners
+moved toward the light's centroid) and blur_columns (rotstar-detect
+--blur-map, detect/blurmap.py). The measurements against the simulator's
+true PSFs and the centroid truth are in doc/blur-map.md.
 """
 
 from __future__ import annotations
