@@ -21,6 +21,7 @@ XDIST := -n $(TEST_JOBS) --dist loadfile
 DEMO_DIR ?= demo-out
 STEREO_DIR ?= stereo-out
 BENCH_ARGS ?=
+BLURMAP_DIR ?= blur-map-out
 
 # The first candidate that really runs and is >= 3.12 (pyenv shims can exist and fail).
 PYTHON := $(shell for c in python3.13 python3.12 $$(ls -d $$(pyenv root 2>/dev/null)/versions/3.1[2-9]*/bin/python3 2>/dev/null | sort -rV) /usr/bin/python3.13 /usr/bin/python3.12 python3; do \
@@ -32,7 +33,7 @@ ifeq ($(UV),)
 UV := $(CURDIR)/.tools/bin/uv
 endif
 
-.PHONY: help setup test test-slow demo stereo bench calib-bench coverage-bench glass-bench pip-check clean check-python system-deps python
+.PHONY: help setup test test-slow demo stereo bench calib-bench coverage-bench glass-bench blur-map-doc pip-check clean check-python system-deps python
 
 help:
 	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
@@ -43,6 +44,7 @@ help:
 	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses)"
 	@echo "make coverage-bench - mrcal's uncertainty with and without boards hanging over the imager's edges"
 	@echo "make glass-bench - a screen's cover glass (0-1.5 mm): plain calibration vs rotstar-calibrate's correction (20/40 poses)"
+	@echo "make blur-map-doc - doc/img/blur-map.png: rotstar-detect --blur-map on a simulated D435 with strong coma"
 	@echo "make pip-check   - install with plain pip (scripts/pip_install.sh) into a fresh venv and check it"
 
 python: check-python  ## the Python >= 3.12 the set-up uses (the plain-pip path of README.md uses it too)
@@ -109,8 +111,15 @@ coverage-bench: setup
 glass-bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/glass_bench.py --work glass-bench-out --doc
 
+# the picture of doc/blur-map.md: 8 near poses through 2.5 waves of coma (rotating-star frames only)
+blur-map-doc: setup
+	$(RUN) rotstar-simulate --out $(BLURMAP_DIR)/seq --camera d435 --seidel coma=2.5,focus=0.3 --poses 8 --no-identity \
+	    --distance 0.18 0.26 --seed 1 --jobs 2 --force
+	$(RUN) rotstar-detect $(BLURMAP_DIR)/seq --blur-map $(BLURMAP_DIR) -o $(BLURMAP_DIR)/corners.vnl --jobs 2
+	cp $(BLURMAP_DIR)/blur_map.png doc/img/blur-map.png
+
 pip-check: check-python
 	PYTHON=$(PYTHON) $(VENV_BIN)/python -m pytest -q -s -m slow tests/cli/test_pip_install.py
 
 clean:
-	rm -rf .venv .tools $(DEMO_DIR) $(STEREO_DIR) .pytest_cache calib-bench-out coverage-bench-out glass-bench-out
+	rm -rf .venv .tools $(DEMO_DIR) $(STEREO_DIR) .pytest_cache calib-bench-out coverage-bench-out glass-bench-out $(BLURMAP_DIR)

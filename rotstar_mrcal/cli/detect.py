@@ -8,7 +8,9 @@ import stat
 import sys
 
 from rotstar_mrcal import dataset
+from rotstar_mrcal.detect.blurmap import blur_rows, write_blur_map
 from rotstar_mrcal.detect.display_offsets import MAX_MOTION
+from rotstar_mrcal.detect.edgespread import PSF_MIN_WINDOW
 from rotstar_mrcal.detect.elements import MIN_WINDOW
 from rotstar_mrcal.peers.registry import METHODS, REFINERS, reason_counts
 from rotstar_mrcal.detect.run import detect_dataset, missing_frames
@@ -61,6 +63,9 @@ def parse_args(argv=None):
     p.add_argument("--refine", choices=REFINERS, default="symmetric",
                    help="symmetric: the paper's Eq. 1 on all rotating-star frames (default); "
                         "opencv: cv2.cornerSubPix on the checkerboard frame; "
+                        "psf: the symmetric fit moved to the light's centroid, where the 16 edges meet, each placed "
+                        "at its line-spread function's mean (corners whose window is under 5 px keep the symmetric "
+                        "fit's; doc/blur-map.md); "
                         "saddle: Lucchese-Mitra saddle fit on the checkerboard frame")
     p.add_argument("--method", choices=DETECT_METHODS, default="rotstar",
                    help="whose corners to write, all from the same poses and started from the rotating star's "
@@ -70,6 +75,10 @@ def parse_args(argv=None):
     p.add_argument("--weights", action="store_true",
                    help="write a weight column (1/sigma of each corner, normalised to median 1) "
                         "for mrcal's --corners-cache-has-weights")
+    p.add_argument("--blur-map", metavar="DIR",
+                   help="also estimate the lens's PSF at every corner from the rotating star's edges and write "
+                        "DIR/blur_map.csv and DIR/blur_map.png (width, elongation, coma over the imager; "
+                        "doc/blur-map.md)")
     p.add_argument("--max-motion", type=number_arg(float, 0, lo_open=True), default=MAX_MOTION,
                    help="reject a pose whose frames disagree by more than this many pixels "
                         "(the camera moved during the sequence; default 0.15)")
@@ -77,6 +86,8 @@ def parse_args(argv=None):
     p.add_argument("--no-hint", action="store_true", help=argparse.SUPPRESS)  # rotstar-calibrate runs its own
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines (skipped poses are still reported)")
     a = p.parse_args(argv)
+    if a.blur_map and os.path.exists(a.blur_map) and not os.path.isdir(a.blur_map):
+        p.error(f"--blur-map {a.blur_map}: exists and is not a folder")
     if a.method != "rotstar" and (a.weights or a.refine != "symmetric"):
         p.error(f"--weights and --refine are rotstar's; --method {a.method} gives its own corners")
     return a
@@ -130,10 +141,11 @@ def _main(argv=None) -> int:
     try:
         det = detect_dataset(ds, window=a.window, refine=REFINERS[a.refine], max_motion=a.max_motion, jobs=a.jobs,
                              progress=lambda r: progress_line(a, ds.layout, progress, r), method=a.method,
-                             corners_file=vnl_name, weights=a.weights)
+                             corners_file=vnl_name, weights=a.weights, blur_map=bool(a.blur_map))
     except dataset.DatasetError as e:
         fail(str(e))
     say_checks(a, det)
+    say_blur_map(a.blur_map, det)
     sparse = write_output(a.output, det.boards(), det.weights() if a.weights else None)
     rc = say_boards(det, sparse) or say_command(a, det, real)
     return EXIT_FAILED if fell_back else rc
@@ -179,13 +191,33 @@ def progress_line(a, layout, progress: Progress, r) -> None:
     progress.step(r.pose, f"{r.corners.n_valid} of {nx_ny} corners{why}")
 
 
+def say_blur_map(outdir, det) -> None:
+    """Write the blur map (detect.blurmap) of the poses that gave a board to outdir, and say where
+
+    A rig gets one map per camera, in outdir/camera-K/.
+    """
+    if not outdir:
+        return
+    for k, cam in det.cameras.items():
+        where = os.path.join(outdir, dataset.camera_folder(k)) if det.dataset.multi_camera else outdir
+        found = cam.found
+        rows = blur_rows([(r.pose, r.corners.corners, r.corners.blur) for r in found])
+        if not rows:
+            say(f"rotstar-detect: --blur-map: no corner with a window of {PSF_MIN_WINDOW:g} px or more; "
+                f"nothing written to {where}")
+            continue
+        title = f"the lens's blur: {len(rows)} corners of {len({r[0] for r in rows})} poses (rotstar-detect --blur-map)"
+        csv_path, png_path = write_blur_map(where, rows, found[0].size, title)
+        say(f"rotstar-detect: blur map of {len(rows)} corners: {csv_path}, {png_path}")
+
+
 def say_checks(a, det) -> None:
     """The dataset's checks: poses whose camera moved, the display offsets, boards labelled unlike"""
     multi = det.dataset.multi_camera
     for k, d in det.cameras.items():
         for r in d.rejected:
             say(f"{r.pose}: skipped: {r.error}")
-        if a.refine == "symmetric" and not (multi and a.quiet):
+        if REFINERS[a.refine].needs == "rotstar" and not (multi and a.quiet):
             say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{d.display.summary()}")
     for pose, why in det.disagree.items():
         say(f"{pose}: skipped in every camera: {why}")

@@ -73,6 +73,7 @@ from rotstar_mrcal.detect.consistency import refined_consistency
 from rotstar_mrcal.detect.display_offsets import (
     MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian,
 )
+from rotstar_mrcal.detect.edgespread import BLUR_FIELDS, blur_columns
 from rotstar_mrcal.detect.elements import by_graph, by_identity
 from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_each_frame, symmetric_refine
 from rotstar_mrcal.detect.response import pixel_noise
@@ -90,6 +91,7 @@ class PoseCorners:
     motion_px: float = 0.0  # frame-to-frame disagreement that display offsets do not explain, px
     shifts: FrameShifts | None = None  # per-frame display offsets of this pose (symmetric refinement)
     unplaced: list | None = None  # why, for each element seen whose identity was not read
+    blur: np.ndarray | None = None  # (ny, nx, len(BLUR_FIELDS)) the local PSF per corner (detect_pose(blur_map=True))
 
     @property
     def found(self) -> bool:
@@ -219,6 +221,18 @@ def refine_with_display_offsets(frames, res, rough, labels, w, pitch) -> tuple:
     return res, shifts
 
 
+def image_shifts(shifts: FrameShifts | None, corners: np.ndarray, labels: np.ndarray, pitch: float):
+    """(nframes, N, 2) the display offsets of each frame at each corner, px; None when there are none to model"""
+    if shifts is None:
+        return None
+    ok = np.isfinite(corners).all(axis=1)
+    if ok.sum() < 4:
+        return None
+    jac = homography_jacobian(grid_homography(corners[ok], labels[ok], pitch), labels * float(pitch))
+    img = shifts.image_shifts(jac)
+    return img if np.abs(img).max() > SHIFT_MIN_PX else None
+
+
 def detect_pose(
     frames: np.ndarray,
     layout: Layout,
@@ -230,6 +244,7 @@ def detect_pose(
     check_motion: bool = True,
     identity: np.ndarray | None = None,
     prefilter_sigma: float = PREFILTER_SIGMA,
+    blur_map: bool = False,
 ) -> PoseCorners:
     """Detect and label the corners of one pose; see the module doc
 
@@ -238,6 +253,8 @@ def detect_pose(
     view give the corners in view), else by the element graph (whole board).
     prefilter_sigma: the Gaussian low-pass (px) before the symmetric
     refinement (module doc); 0 for the paper's refinement on the raw frames.
+    blur_map: also estimate the local PSF at every corner (PoseCorners.blur,
+    edgespread.blur_columns; NaN where the window is too small).
     """
     frames = np.asarray(frames, np.float32)
     if len(frames) < 2:
@@ -288,6 +305,8 @@ def detect_pose(
                                      f"(the frames turn or scale against each other by {motion:.2f} px, "
                                      f"limit {max_motion})")
         q, ok = res.corners, res.ok
+        if refine.correct is not None:  # e.g. the PSF-aware refiner: from the symmetric corner to the light's
+            q = refine.correct(frames, q, w, image_shifts(shifts, q, labels, layout.pitch))
         reasons[labels[:, 1], labels[:, 0]] = res.reason
         sigma[labels[:, 1], labels[:, 0]] = res.sigma
         cov[labels[:, 1], labels[:, 0]] = res.cov
@@ -319,4 +338,8 @@ def detect_pose(
         q[drop] = np.nan
     corners = np.full((layout.ny, layout.nx, 2), np.nan)
     corners[labels[:, 1], labels[:, 0]] = q + off
-    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced)
+    blur = None
+    if blur_map:
+        blur = np.full((layout.ny, layout.nx, len(BLUR_FIELDS)), np.nan)
+        blur[labels[:, 1], labels[:, 0]] = blur_columns(frames, q, w)
+    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced, blur)

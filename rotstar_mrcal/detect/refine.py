@@ -345,6 +345,8 @@ class Refiner:
     needs: str  # 'rotstar' or 'checkerboard'
     description: str
     refine: Callable  # (frames (K, H, W), starts (N, 2), window) -> (N, 2), NaN = failed
+    correct: Callable | None = None  # needs 'rotstar' only: (frames, symmetric corners (N, 2), windows (N,),
+    # display offsets (K, N, 2) or None) -> (N, 2), applied by detect_pose after its symmetric refinement
 
 
 def refine_symmetric(frames, starts, window=10.0) -> np.ndarray:

@@ -186,10 +186,13 @@ def method_available(layout: Layout, name: str) -> str:
 
 def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refiner = SYMMETRIC,
                   max_motion: float = MAX_MOTION, jobs: int = 1, progress=None,
-                  method: str = "rotstar") -> DatasetCorners:
-    """Detect camera k's poses of ds, then check their frames' motion over the camera's poses (module doc)"""
+                  method: str = "rotstar", blur_map: bool = False) -> DatasetCorners:
+    """Detect camera k's poses of ds, then check their frames' motion over the camera's poses (module doc)
+
+    blur_map: also the local PSF at every corner (PoseCorners.blur, detect_pose(blur_map=True)).
+    """
     poses = ds.poses[k]
-    opts = dict(window=window, refine=refine, max_motion=max_motion, method=method)
+    opts = dict(window=window, refine=refine, max_motion=max_motion, method=method, blur_map=blur_map)
     done: dict[str, PoseResult] = {}
     for r in process_map(detect_one, [(ds.path, p, ds.frames, ds.layout, opts) for p in poses], jobs):
         done[r.pose] = r
@@ -245,7 +248,7 @@ class Detection:
 def detect_dataset(ds: Dataset, *, window: float = 10.0, refine: Refiner = SYMMETRIC,
                    max_motion: float = MAX_MOTION, jobs: int = 1, progress=None, method: str = "rotstar",
                    corners_file: str = "corners.vnl", weights: bool = False,
-                   max_turn_deg: float = MAX_TURN_DEG) -> Detection:
+                   max_turn_deg: float = MAX_TURN_DEG, blur_map: bool = False) -> Detection:
     """Detect every camera's poses of ds, check them, and say how to calibrate; see the module doc
 
     method: 'rotstar', or a method of the registry that starts from rotstar's
@@ -257,7 +260,7 @@ def detect_dataset(ds: Dataset, *, window: float = 10.0, refine: Refiner = SYMME
     if why:
         raise DatasetError(f"{pattern_file(ds.path)}: {why}")
     cams = {k: detect_camera(ds, k, window=window, refine=refine, max_motion=max_motion, jobs=jobs,
-                             progress=progress, method=method) for k in ds.cameras}
+                             progress=progress, method=method, blur_map=blur_map) for k in ds.cameras}
     disagree = check_labelling({k: d.found for k, d in cams.items()}, max_turn_deg) if len(cams) > 1 else {}
     det = Detection(ds, cams, disagree, {}, {}, "", [])
     det.kept = {k: [r for r in det.found(k) if mrcal_keeps(r.corners.corners, r.corners.weights() if weights else None)]

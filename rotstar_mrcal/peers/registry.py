@@ -8,9 +8,9 @@ SYNOPSIS
     >>> METHODS["saddle"].needs, METHODS["saddle"].start
     ('checkerboard', 'rotstar')
     >>> method_names(needs=("rotstar", "checkerboard"), start="own")
-    ['rotstar', 'rotstar-weighted', 'opencv-sb', 'opencv-classic']
+    ['rotstar', 'rotstar-weighted', 'opencv-sb', 'opencv-classic', 'rotstar-psf']
     >>> list(REFINERS)
-    ['symmetric', 'opencv', 'saddle']
+    ['symmetric', 'psf', 'opencv', 'saddle']
 
 A *method* turns the images of one pose into labelled corners (ny, nx, 2)
 (mrcal order, NaN = missing) or no board. Its entry says:
@@ -54,6 +54,8 @@ import numpy as np
 
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.detect.pipeline import detect_pose
+from rotstar_mrcal.detect.edgespread import psf_correct
+from rotstar_mrcal.detect.pipeline import prefilter
 from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_symmetric
 from rotstar_mrcal.peers import checkerboard as baselines
 from rotstar_mrcal.peers.checkerboard import (
@@ -83,8 +85,22 @@ def refine_saddle(frames, starts, window=5) -> np.ndarray:
     return _per_frame_mean(saddle_refine, frames, starts, window)
 
 
+def refine_psf(frames, starts, window=10.0) -> np.ndarray:
+    """The symmetric fit on the low-passed frames, then each corner moved to the light's centroid (psf_correct)"""
+    frames = np.asarray(frames, np.float32)
+    frames = frames[None] if frames.ndim == 2 else frames
+    q = refine_symmetric(prefilter(frames), starts, window)
+    return psf_correct(frames, q, window)
+
+
+PSF = Refiner("psf", "rotstar", "the symmetric fit, then each corner moved to where its 16 edges, each at its "
+              "line-spread function's mean, meet: the light's centroid (detect.edgespread)", refine_psf,
+              correct=psf_correct)
+
+
 REFINERS = {r.name: r for r in (
     SYMMETRIC,
+    PSF,
     Refiner("opencv", "checkerboard", "cv2.cornerSubPix (Forstner); on several frames, the mean of each frame's",
             refine_opencv),
     Refiner("saddle", "checkerboard", "Lucchese-Mitra quadratic saddle fit; on several frames, the mean",
@@ -142,6 +158,12 @@ def rotstar_detection(p: PoseImages):
 
 def _rotstar(p: PoseImages) -> Found:
     r = rotstar_detection(p)
+    return Found(r.corners if r.found else None, None, r.error, r.shifts)
+
+
+def _rotstar_psf(p: PoseImages) -> Found:
+    r = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale, window=p.window,
+                    identity=p.identity, refine=PSF)
     return Found(r.corners if r.found else None, None, r.error, r.shifts)
 
 
@@ -284,6 +306,9 @@ METHODS = {m.name: m for m in (
     Method("mrgingham-noclahe", "mrgingham --noclahe", "square", "own",
            "square checkerboard, mrgingham --noclahe (no CLAHE equalisation)", _mrgingham, ("--noclahe",),
            relabel=True, demo=False),
+    Method("rotstar-psf", "rotstar, PSF-aware (centroid of the light)", "rotstar", "own",
+           "rotating-star frames, the symmetric fit moved to where the edges' line-spread means meet "
+           "(rotstar-detect --refine psf)", _rotstar_psf, demo=False),
 )}
 
 

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from conftest import D435_SETTINGS, ROLES, huge_png
+from rotstar_mrcal import simulate
 from rotstar_mrcal.simulate import look_at_pose, write_dataset
 from rotstar_mrcal.vnl import read_corners
 
@@ -518,3 +519,42 @@ def test_frame_size_read_from_the_pgm_header(tmp_path, size):
     with pytest.raises(dataset.DatasetError, match=rf"^{re.escape(fn)}: its header claims an? .*(more than 50|"
                                                    rf"{size[0]}x{size[1]}).*: a corrupt or foreign file$"):
         dataset.read_image(fn)
+
+
+@pytest.mark.slow
+def test_blur_map_and_psf_refine_under_coma(run_cli, tmp_path):
+    """--blur-map DIR writes the table and the picture; the widths and coma directions are the lens's;
+    --refine psf brings the corners nearer the light's centroid than the symmetric fit (near views, 2.5 waves)"""
+    from rotstar_mrcal.detect.blurmap import read_table
+    from rotstar_mrcal.optics.psf import LensPSF
+    from rotstar_mrcal.optics.wavefront import Seidel
+    from rotstar_mrcal.pattern.layout import make_layout
+    from rotstar_mrcal.simulate import Settings, preset_model
+
+    model, layout = preset_model("pinhole-small"), make_layout(screen=(800, 600), pitch=100, band=24, identity=False)
+    lens = LensPSF(Seidel(coma=2.5, focus=0.3), model.imagersize())
+    rts = [np.array((0, 0, 0, -0.0257 + dx, -0.0193 + dy, 0.08)) for dx, dy in ((0.025, 0.012), (-0.02, -0.01))]
+    seq = str(tmp_path / "seq")
+    write_dataset(seq, layout, model, np.array(rts), Settings(bits=16, seed=0), jobs=2, psf=lens)
+    truth = {f"pose{i:03d}": simulate.true_corners(model, layout, rt) for i, rt in enumerate(rts)}
+    err = {}
+    for refine in ("symmetric", "psf"):
+        r = run_cli("rotstar-detect", "--refine", refine, "--blur-map", tmp_path / "bm", "-o",
+                    tmp_path / f"{refine}.vnl", seq, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+        assert "blur map of" in r.stderr
+        boards = boards_of((tmp_path / f"{refine}.vnl").read_text(), seq, layout)
+        err[refine] = np.concatenate([np.linalg.norm(boards[p] - truth[p], axis=-1).ravel() for p in truth])
+    rms = {k: float(np.sqrt(np.nanmean(v ** 2))) for k, v in err.items()}
+    assert rms["psf"] < 0.7 * rms["symmetric"], rms
+    assert (tmp_path / "bm" / "blur_map.png").stat().st_size > 10000
+    t = read_table(str(tmp_path / "bm" / "blur_map.csv"))
+    assert len(t) > 20
+    W, H = model.imagersize()
+    c = np.array(((W - 1) / 2, (H - 1) / 2))
+    h = np.linalg.norm(t[:, :2] - c, axis=1) / np.hypot(*c)
+    radial = np.degrees(np.arctan2(t[:, 1] - c[1], t[:, 0] - c[0]))
+    strong = 2.5 * h > 1.0
+    off = np.abs((t[strong, 8] - radial[strong] + 180) % 360 - 180)  # the tail points away from the centre
+    assert strong.sum() > 5 and np.median(off) < 15, off
+    assert 0.4 < np.median(t[:, 2]) < 1.2

@@ -1,0 +1,210 @@
+"""Corner error against the centroid truth under coma: rotstar, rotstar-psf and the saddle fit (issue 24)
+
+SYNOPSIS
+
+    nice -n 10 .venv/bin/python -m rotstar_lab.benchmark.psfcheck --coma 2.5 --focus 0.3 --npose 4
+    (PYTHONPATH=scripts; renders are cached in --cache, default /tmp/rotstar-psfcheck)
+
+The scene of the failure tables (failures.py): the d435 preset, make demo's
+lens (optics.LensPSF, coma and focus in waves at the image corners; the
+light's centroid on the true model), the paper layout without identity
+frames, random poses from failures.make_units' generator, read noise 1 %,
+shot 1e-4, 16 bits. Per pose the 8 rotating-star frames are detected by
+rotstar (detect_pose, the symmetric fit) and by rotstar-psf; the saddle fit
+runs on the 8-capture averaged checkerboard from the true corners moved 0.5
+px, in the true windows (as in the failure tables). --gaussian S replaces the
+lens by a symmetric Gaussian PSF of S px.
+
+--check-blur-map CSV instead compares a blur map (rotstar-detect --blur-map
+of a d435 dataset simulated with --seidel coma=C,focus=F, e.g. make
+blur-map-doc) with the lens's true PSFs (LensPSF's kernel at each corner, its
+projections on 16 directions clipped to the row's reach): the width ratio,
+and the coma direction error where the coma is above 0.5 waves, per corner
+and pooled in 128-px cells.
+
+Printed: per method the RMS of the corner error against the truth, and its
+pose-dependent part: the error minus the mean error of its image cell
+(CELL_PX squares, over all poses; cells with one corner left out), RMS, with
+the n/(n-1) correction; and the detection time per pose.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+from rotstar_mrcal import simulate
+from rotstar_mrcal.detect.blurmap import read_table
+from rotstar_mrcal.detect.edgespread import projected_moments, psf_estimate
+from rotstar_mrcal.detect.pipeline import detect_pose
+from rotstar_mrcal.optics.psf import LensPSF
+from rotstar_mrcal.optics.wavefront import Seidel
+from rotstar_mrcal.peers.checkerboard import refine_by_window, saddle_refine
+from rotstar_mrcal.peers.registry import REFINERS
+from rotstar_mrcal.simulate.captures import averaged_captures, lit_box
+from rotstar_mrcal.simulate.visibility import in_view, true_windows
+from rotstar_lab.benchmark.failures import paper_layout
+from rotstar_lab.benchmark.scoring import MATCH_PX, perturbed_start
+
+CELL_PX = 80.0
+
+
+def render(model, layout, rt, psf, path):
+    """(rotstar frames irradiance (8, H, W), checkerboard irradiance (H, W)), cached in path"""
+    if os.path.exists(path):
+        z = np.load(path)
+        return z["rot"], z["cb"]
+    fr = [f for f in layout.frames() if f["kind"] in ("rotstar", "checkerboard")]
+    kinds = np.array([f["kind"] for f in fr])
+    light = simulate.shown_light(simulate.exact_frames(layout, fr), 2.2, 2.2)
+    screen = simulate.make_screen(light, layout)
+    E = simulate.render_irradiance(screen, model, rt, supersample=4, psf=psf)
+    rot, cb = E[kinds == "rotstar"], E[kinds == "checkerboard"][0]
+    np.savez(path, rot=rot, cb=cb)
+    return rot, cb
+
+
+def pose_dependent(pos, err):
+    """RMS of err (n, 2) minus its CELL_PX cell's mean over all poses (cells of >= 2 corners), n/(n-1) corrected
+
+    >>> pos = np.array([[10.0, 10.0], [20.0, 20.0], [500.0, 500.0]])
+    >>> round(pose_dependent(pos, np.array([[0.1, 0.0], [0.3, 0.0], [9.0, 9.0]])), 4)   # the lone corner: no cell
+    0.1414
+
+    (residuals +-0.1 px about the cell's mean, times sqrt(n / (n - 1)) for n = 2.)
+    """
+    cell = np.floor(pos / CELL_PX).astype(int)
+    key = cell[:, 0] * 1000 + cell[:, 1]
+    out, dof = 0.0, 0
+    for k in np.unique(key):
+        e = err[key == k]
+        if len(e) < 2:
+            continue
+        out += ((e - e.mean(axis=0)) ** 2).sum()
+        dof += (len(e) - 1) * 2
+    return float(np.sqrt(out / max(dof, 1) * 2))
+
+
+def cpu_time(frames, layout, fs, refine: str, repeats: int = 3) -> float:
+    """The least CPU time (s) of `repeats` detect_pose runs with REFINERS[refine]"""
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.process_time()
+        detect_pose(frames, layout, full_scale=fs, refine=REFINERS[refine])
+        best = min(best, time.process_time() - t0)
+    return best
+
+
+def check_blur_map(path, coma, focus, imagersize=(1280, 800)):
+    """Print the blur map's width and coma direction against the lens's true PSFs (module doc)"""
+    t = read_table(path)
+    lens = LensPSF(Seidel(coma=coma, focus=focus), imagersize)
+    c = (np.array(imagersize) - 1) / 2
+    normals = np.arange(16) * np.pi / 16
+    truth = {}
+    tw, ta = np.empty(len(t)), np.empty(len(t))
+    for n, (x, y, *_, reach) in enumerate(t):
+        key = (int(x // 64), int(y // 64), reach)  # LensPSF's tiles are 64 px
+        if key not in truth:
+            e = psf_estimate(projected_moments(lens._built().kernel_at(x, y, 4), 4, normals, reach))
+            truth[key] = (e.width[0], e.coma_angle[0])
+        tw[n], ta[n] = truth[key]
+    ratio = t[:, 2] / tw
+    waves = coma * np.linalg.norm(t[:, :2] - c, axis=1) / np.hypot(*c)
+    strong = waves > 0.5
+    da = np.abs(np.degrees(np.angle(np.exp(1j * (np.radians(t[:, 8]) - ta)))))
+    print(f"{len(t)} corners: width estimate / truth median {np.median(ratio):.3f} (5-95 % "
+          f"{np.percentile(ratio, 5):.3f}-{np.percentile(ratio, 95):.3f}), within 10 %: {np.mean(abs(ratio - 1) < 0.1):.0%}")
+    print(f"coma > 0.5 waves: {strong.sum()} corners, direction error median {np.median(da[strong]):.1f} deg, "
+          f"within 15 deg: {np.mean(da[strong] < 15):.0%}")
+    for lo, hi in ((0.5, 1.0), (1.0, 1.5), (1.5, 9)):
+        m = (waves >= lo) & (waves < hi)
+        if m.any():
+            print(f"  {lo}-{hi} waves: {m.sum()} corners, median {np.median(da[m]):.1f} deg, within 15: {np.mean(da[m] < 15):.0%}")
+    cell = (t[:, 0] // 128).astype(int) * 1000 + (t[:, 1] // 128).astype(int)
+    errs = [abs(np.degrees(np.angle((t[m, 6] * np.exp(1j * (np.radians(t[m, 8]) - ta[m]))).mean())))
+            for m in (strong & (cell == k) for k in np.unique(cell[strong]))]
+    print(f"pooled in 128-px cells ({len(errs)}): direction error median {np.median(errs):.1f} deg, "
+          f"max {np.max(errs):.1f}, within 15 deg: {np.mean(np.array(errs) < 15):.0%}")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--coma", type=float, default=1.5)
+    p.add_argument("--focus", type=float, default=0.3)
+    p.add_argument("--gaussian", type=float, default=0.0)
+    p.add_argument("--npose", type=int, default=4)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--cache", default="/tmp/rotstar-psfcheck")
+    p.add_argument("--methods", default="symmetric,psf,saddle")
+    p.add_argument("--distance", default="", help="near,far metres (default: random_poses' range)")
+    p.add_argument("--check-blur-map", metavar="CSV", help="compare a blur map with the lens's true PSFs")
+    p.add_argument("--timing", action="store_true",
+                   help="also the CPU time of detect_pose per pose, symmetric and psf (the least of 3 runs each)")
+    a = p.parse_args(argv)
+    if a.check_blur_map:
+        return check_blur_map(a.check_blur_map, a.coma, a.focus)
+    os.makedirs(a.cache, exist_ok=True)
+    model = simulate.preset_model("d435")
+    layout = paper_layout()
+    psf = a.gaussian if a.gaussian > 0 else LensPSF(Seidel(coma=a.coma, focus=a.focus), model.imagersize())
+    tag = f"g{a.gaussian:g}" if a.gaussian > 0 else f"c{a.coma:g}f{a.focus:g}"
+    dist = tuple(float(v) for v in a.distance.split(",")) if a.distance else None
+    rts = simulate.random_poses(model, layout, a.npose, np.random.default_rng([3, a.seed]), distance=dist)
+    if dist:
+        tag += f"-d{a.distance}"
+    tag += f"-n{a.npose}"  # random_poses' poses depend on how many
+    fs = float(simulate.full_scale_code(16))
+    methods = a.methods.split(",")
+    acc = {m: ([], [], [], []) for m in methods}  # positions, errors, seconds, true windows
+    for i, rt in enumerate(rts):
+        t0 = time.perf_counter()
+        rot, cb = render(model, layout, rt, psf, os.path.join(a.cache, f"{tag}-s{a.seed}-p{i}.npz"))
+        print(f"pose {i}: rendered ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
+        truth = simulate.true_corners(model, layout, rt)
+        view = in_view(model, layout, rt)
+        rng = np.random.default_rng([5, a.seed, i])
+
+        def expose(img):
+            return simulate.expose(img, gain=0.9, noise=0.01, shot=1e-4, bits=16, rng=rng)
+
+        frames = expose(rot).astype(np.float32)
+        if a.timing:
+            print(f"pose {i}: CPU s per detection " + ", ".join(
+                f"{m} {cpu_time(frames, layout, fs, m):.2f}" for m in ("symmetric", "psf")))
+        for m in methods:
+            t0 = time.perf_counter()
+            if m == "saddle":
+                avg = averaged_captures(cb, expose, 8, lit_box(cb, 0.02))
+                q = refine_by_window(lambda im, x, w: saddle_refine(im, x, win=w), avg,
+                                     perturbed_start(truth, a.seed, i), true_windows(model, layout, rt))
+            else:
+                q = detect_pose(frames, layout, full_scale=fs, refine=REFINERS[m]).corners
+            dt = time.perf_counter() - t0
+            e = q - truth
+            ok = view & np.isfinite(e).all(axis=-1) & (np.linalg.norm(e, axis=-1) <= MATCH_PX)
+            acc[m][0].append(truth[ok])
+            acc[m][1].append(e[ok])
+            acc[m][2].append(dt)
+            acc[m][3].append(true_windows(model, layout, rt)[ok])
+        print(f"pose {i}: windows {np.nanpercentile(true_windows(model, layout, rt), [5, 50, 95]).round(1)}",
+              file=sys.stderr)
+    print(f"{tag}, {a.npose} poses (seed {a.seed})")
+    for m in methods:
+        pos, err = np.concatenate(acc[m][0]), np.concatenate(acc[m][1])
+        rms = float(np.sqrt((err ** 2).sum(axis=1).mean()))
+        print(f"  {m:10s} corners {len(err):5d}  RMS {rms:.4f} px  pose-dependent {pose_dependent(pos, err):.4f} px"
+              f"  mean error ({err[:, 0].mean():+.4f}, {err[:, 1].mean():+.4f})  {np.mean(acc[m][2]):.2f} s/pose")
+        w, e = np.concatenate(acc[m][3]), np.linalg.norm(err, axis=1)
+        print("             by true window: " + "; ".join(
+            f"{lo:g}-{hi:g} px: {(sel := (w >= lo) & (w < hi)).sum()} RMS {np.sqrt(np.mean(e[sel] ** 2)):.4f}"
+            for lo, hi in ((0, 4), (4, 6), (6, 99)) if ((w >= lo) & (w < hi)).any()))
+
+
+if __name__ == "__main__":
+    main()
