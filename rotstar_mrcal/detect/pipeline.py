@@ -20,7 +20,7 @@ by_graph), so that boards partly out of view give the corners in view; with the 
 name what went wrong: exposure, the border bands' colour frame by frame
 (sequence.py: frames out of order), the element count (too small, hidden,
 out of view), the stars' angles (indexing.frame_angles: order, mirror), and
-the per-frame display offsets and motion (display.py). Each stage is a pure
+the per-frame display maps and motion (display_offsets.py). Each stage is a pure
 function in its own module; this one strings them together and turns their
 failures into a reason. A board whose labelling is not certain is never
 returned: it is skipped with the reason.
@@ -87,8 +87,8 @@ class PoseCorners:
     sigma: np.ndarray | None = None  # (ny, nx) rms residual of the refinement
     cov: np.ndarray | None = None  # (ny, nx, 2, 2) corner covariance estimate, px^2
     window: np.ndarray | None = None  # (ny, nx) refinement half-window used
-    motion_px: float = 0.0  # frame-to-frame disagreement that display offsets do not explain, px
-    shifts: FrameShifts | None = None  # per-frame display offsets of this pose (symmetric refinement)
+    motion_px: float = 0.0  # frame-to-frame disagreement that the display maps do not explain, px
+    shifts: FrameShifts | None = None  # per-frame display maps of this pose (symmetric refinement)
     unplaced: list | None = None  # why, for each element seen whose identity was not read
 
     @property
@@ -199,21 +199,33 @@ def prefilter(frames: np.ndarray, sigma: float = PREFILTER_SIGMA) -> np.ndarray:
     if sigma <= 0:
         return frames
     return np.stack([cv2.GaussianBlur(f, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE) for f in frames])
-SHIFT_MIN_PX = 0.02  # display offsets below this (camera px) are not modelled in the refinement
+SHIFT_MIN_PX = 0.02  # display maps that move no corner by this much (camera px) are not modelled in the refinement
 
 
-def refine_with_display_offsets(frames, res, rough, labels, w, pitch) -> tuple:
-    """(Refined, FrameShifts): each frame's displacement measured (display.py), then refined with it modelled
+def board_centre(layout: Layout) -> np.ndarray:
+    """(2,) display px, relative to corner (0, 0): the centre of the grid of corners, where display maps apply
+
+        >>> from rotstar_mrcal.pattern.layout import make_layout
+        >>> board_centre(make_layout(screen=(800, 600), pitch=100, band=24)).tolist()
+        [250.0, 150.0]
+    """
+    return np.array([(layout.nx - 1) / 2, (layout.ny - 1) / 2]) * float(layout.pitch)
+
+
+def refine_with_display_offsets(frames, res, rough, labels, w, pitch, centre=None) -> tuple:
+    """(Refined, FrameShifts): each frame's display map measured (display_offsets.py), then refined with it modelled
 
     res: the joint refinement of the corners (labels (N, 2), rough starts
-    (N, 2), windows w (N,)); pitch: display pixels per grid step. The second
-    refinement runs only when the offsets move a corner by SHIFT_MIN_PX or more.
+    (N, 2), windows w (N,)); pitch: display pixels per grid step; centre:
+    the board's centre, display px. The second refinement runs only when the
+    maps move a corner by SHIFT_MIN_PX or more.
     """
     idx, per = per_frame_corners(frames, res.corners, w, res.ok)
     H = grid_homography(res.corners[res.ok], labels[res.ok], pitch)
-    jac = homography_jacobian(H, labels * float(pitch))
-    shifts = frame_shifts(per, res.corners[idx], labels[idx], pitch, jac[idx])
-    img = shifts.image_shifts(jac)
+    uv = labels * float(pitch)
+    jac = homography_jacobian(H, uv)
+    shifts = frame_shifts(per, res.corners[idx], labels[idx], pitch, jac[idx], centre)
+    img = shifts.image_shifts(jac, uv)
     if np.abs(img).max() > SHIFT_MIN_PX:
         res = symmetric_refine(frames, np.where(res.ok[:, None], res.corners, rough), w, shifts=img)
     return res, shifts
@@ -277,16 +289,17 @@ def detect_pose(
     cov = np.full((layout.ny, layout.nx, 2, 2), np.nan)
     motion = 0.0
     shifts = None
-    if refine.needs == "rotstar":  # the paper's symmetric refinement, display offsets and motion check
+    if refine.needs == "rotstar":  # the paper's symmetric refinement, display maps and motion check
         lowpass = prefilter(frames, min(prefilter_sigma, PREFILTER_PER_WINDOW * float(np.median(w))))
         res = symmetric_refine(lowpass, rough, w)
         if check_motion and res.ok.sum() >= 4:
-            res, shifts = refine_with_display_offsets(lowpass, res, rough, labels, w, layout.pitch)
+            res, shifts = refine_with_display_offsets(lowpass, res, rough, labels, w, layout.pitch,
+                                                      board_centre(layout))
             motion = shifts.residual_px
             if motion > max_motion:
                 return _fail(layout, f"frames do not align: the camera moved during the sequence "
-                                     f"(the frames turn or scale against each other by {motion:.2f} px, "
-                                     f"limit {max_motion})")
+                                     f"(the frames bend against each other by {motion:.2f} px beyond what one "
+                                     f"affine map per frame explains, limit {max_motion})")
         q, ok = res.corners, res.ok
         reasons[labels[:, 1], labels[:, 0]] = res.reason
         sigma[labels[:, 1], labels[:, 0]] = res.sigma

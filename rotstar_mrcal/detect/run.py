@@ -36,8 +36,9 @@ A pose that gives no board says why:
 
 Every camera is detected alike (one camera is a rig of one, its pose folders
 'poseNNN'; a rig's are 'poseNNN/camera-K'). Poses are detected independently
-(in worker processes with jobs > 1); the display offsets are then estimated
-per camera over its poses that gave a board (display_offsets.dataset_offsets)
+(in worker processes with jobs > 1); the display maps (one affine map per
+frame in screen coordinates) are then estimated per camera over its poses
+that gave a board (display_offsets.dataset_offsets)
 and a pose whose frames moved differently from the others is rejected as a
 camera that moved during the sequence, with how far it moved. With several
 cameras, each pose's boards are checked to be labelled alike in every camera
@@ -205,7 +206,7 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
     rejected = [r for r in results if r.pose in display.moved(max_motion)]
     for r in rejected:
         r.error = (f"frames do not align: the camera moved during the sequence (its frames moved "
-                   f"{r.corners.motion_px:.2f} px against each other beyond the screen's own offsets, "
+                   f"{r.corners.motion_px:.2f} px against each other beyond the screen's own maps, "
                    f"limit {max_motion})")
     return DatasetCorners(ds.path, ds.layout, ds.pattern, results, display, rejected)
 
