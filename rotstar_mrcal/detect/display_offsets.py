@@ -160,7 +160,10 @@ def frame_shifts(per_frame: np.ndarray, q: np.ndarray, labels: np.ndarray, pitch
     fin = np.isfinite(per_frame).all(axis=2)  # (nf, N)
     ok = (fin.sum(axis=0) >= max(2, nf // 2)) & np.isfinite(q).all(axis=1)
     uv = labels * float(pitch)
-    c = np.mean(uv[ok], axis=0) if centre is None and ok.any() else np.asarray(centre if centre is not None else (0, 0), float)
+    if centre is not None:
+        c = np.asarray(centre, float)
+    else:
+        c = np.mean(uv[ok], axis=0) if ok.any() else np.zeros(2)
     if ok.sum() < 3 or (fin[:, ok].sum(axis=1) < 3).any():
         return FrameShifts(np.zeros((nf, 2)), np.nan, 0.0, centre=c)
     if jac is None:
@@ -237,8 +240,8 @@ class DisplayCheck:
         lin = np.zeros((len(self.offsets), 2, 2)) if self.linear is None else self.linear
         out = []
         for k, ((x, y), L) in enumerate(zip(self.offsets, lin * 1e6)):
-            out.append(f"frame {k}: shift ({x:+.2f}, {y:+.2f}) display px, scale x {L[0, 0]:+.0f} y {L[1, 1]:+.0f} ppm, "
-                       f"turn {(L[1, 0] - L[0, 1]) / 2:+.0f} ppm, shear {(L[1, 0] + L[0, 1]) / 2:+.0f} ppm")
+            out.append(f"frame {k}: shift ({x:+.2f}, {y:+.2f}) display px, "
+                       f"scale x {L[0, 0]:+.0f} y {L[1, 1]:+.0f} ppm, turn {(L[1, 0] - L[0, 1]) / 2:+.0f} ppm, shear {(L[1, 0] + L[0, 1]) / 2:+.0f} ppm")
         return out
 
     def summary(self) -> str:
