@@ -70,6 +70,7 @@ class FrameShifts:
     linear: np.ndarray | None = None  # (nframes, 2, 2) the maps' linear parts (scale, turn, shear), zero mean
     centre: np.ndarray | None = None  # (2,) display px: the board's centre, where offsets apply
     uv: np.ndarray | None = None  # (n, 2) display px of the corners the maps were measured at
+    applied: bool = False  # whether the pose's joint refinement modelled these maps (they moved a corner enough)
 
     def __post_init__(self):
         nf = len(self.offsets)
@@ -241,7 +242,8 @@ class DisplayCheck:
         out = []
         for k, ((x, y), L) in enumerate(zip(self.offsets, lin * 1e6)):
             out.append(f"frame {k}: shift ({x:+.2f}, {y:+.2f}) display px, "
-                       f"scale x {L[0, 0]:+.0f} y {L[1, 1]:+.0f} ppm, turn {(L[1, 0] - L[0, 1]) / 2:+.0f} ppm, shear {(L[1, 0] + L[0, 1]) / 2:+.0f} ppm")
+                       f"scale x {L[0, 0]:+.0f} y {L[1, 1]:+.0f} ppm, turn {(L[1, 0] - L[0, 1]) / 2:+.0f} ppm, "
+                       f"shear {(L[1, 0] + L[0, 1]) / 2:+.0f} ppm")
         return out
 
     def summary(self) -> str:
@@ -253,6 +255,14 @@ class DisplayCheck:
                     f"{self.poses} poses; the estimate's noise {self.noise:.3f})")
         return (f"display maps (per frame, the same in all {self.poses} poses; a pixel-exact player on a good "
                 f"screen shows none: check the player and the screen's scaling):\n  " + "\n  ".join(self.frame_lines()))
+
+    def refinement_maps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(offsets, linear, centre) for the joint refinement: the maps, or zeros when they are not significant"""
+        n = len(self.offsets)
+        if not self.significant():
+            return np.zeros((n, 2)), np.zeros((n, 2, 2)), np.zeros(2)
+        lin = np.zeros((n, 2, 2)) if self.linear is None else self.linear
+        return self.offsets, lin, np.zeros(2) if self.centre is None else self.centre
 
     def as_dict(self) -> dict | None:
         """The maps for a JSON file: offsets (display px at centre), linear (2x2 per frame), centre; None: none"""

@@ -71,7 +71,7 @@ import numpy as np
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.detect.consistency import refined_consistency
 from rotstar_mrcal.detect.display_offsets import (
-    MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian,
+    MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian, map_displacement,
 )
 from rotstar_mrcal.detect.elements import by_graph, by_identity
 from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_each_frame, symmetric_refine
@@ -90,6 +90,7 @@ class PoseCorners:
     motion_px: float = 0.0  # frame-to-frame disagreement that the display maps do not explain, px
     shifts: FrameShifts | None = None  # per-frame display maps of this pose (symmetric refinement)
     unplaced: list | None = None  # why, for each element seen whose identity was not read
+    prefilter_px: float = 0.0  # the Gaussian low-pass (px) the symmetric refinement ran on
 
     @property
     def found(self) -> bool:
@@ -228,7 +229,38 @@ def refine_with_display_offsets(frames, res, rough, labels, w, pitch, centre=Non
     img = shifts.image_shifts(jac, uv)
     if np.abs(img).max() > SHIFT_MIN_PX:
         res = symmetric_refine(frames, np.where(res.ok[:, None], res.corners, rough), w, shifts=img)
+        shifts.applied = True
     return res, shifts
+
+
+def refine_with_maps(frames: np.ndarray, layout: Layout, r: PoseCorners, offsets, linear, centre) -> PoseCorners:
+    """r's corners refined again on frames with given display maps (a dataset's) instead of the pose's own
+
+    offsets (nframes, 2), linear (nframes, 2, 2), centre (2,): the maps, as
+    display_offsets.FrameShifts (zeros: the plain joint refinement). Only
+    corners r found are refined, in r's windows and on frames low-passed as
+    before; a corner whose second refinement fails keeps its first.
+    """
+    j, i = np.nonzero(np.isfinite(r.corners[..., 0]))
+    if len(i) < 4 or r.window is None:
+        return r
+    labels, q, w = np.column_stack((i, j)), r.corners[j, i], r.window[j, i]
+    H, W = frames.shape[1:]
+    m = int(np.ceil(np.max(w))) + 4
+    x0, y0 = np.maximum(np.floor(q.min(axis=0)).astype(int) - m, 0)
+    x1, y1 = np.minimum(np.ceil(q.max(axis=0)).astype(int) + m + 1, (W, H))
+    off = np.array([x0, y0], float)
+    lowpass = prefilter(np.asarray(frames, np.float32)[:, y0:y1, x0:x1], r.prefilter_px)
+    uv = labels * float(layout.pitch)
+    jac = homography_jacobian(grid_homography(q, labels, layout.pitch), uv)
+    img = np.einsum("nab,knb->kna", jac, map_displacement(offsets, linear, centre, uv))
+    res = symmetric_refine(lowpass, q - off, w, shifts=img)
+    corners, sigma, cov = r.corners.copy(), r.sigma.copy(), r.cov.copy()
+    k = res.ok
+    corners[j[k], i[k]] = res.corners[k] + off
+    sigma[j[k], i[k]] = res.sigma[k]
+    cov[j[k], i[k]] = res.cov[k]
+    return dataclasses.replace(r, corners=corners, sigma=sigma, cov=cov)
 
 
 def detect_pose(
@@ -290,7 +322,8 @@ def detect_pose(
     motion = 0.0
     shifts = None
     if refine.needs == "rotstar":  # the paper's symmetric refinement, display maps and motion check
-        lowpass = prefilter(frames, min(prefilter_sigma, PREFILTER_PER_WINDOW * float(np.median(w))))
+        lowpass_sigma = min(prefilter_sigma, PREFILTER_PER_WINDOW * float(np.median(w)))
+        lowpass = prefilter(frames, lowpass_sigma)
         res = symmetric_refine(lowpass, rough, w)
         if check_motion and res.ok.sum() >= 4:
             res, shifts = refine_with_display_offsets(lowpass, res, rough, labels, w, layout.pitch,
@@ -332,4 +365,5 @@ def detect_pose(
         q[drop] = np.nan
     corners = np.full((layout.ny, layout.nx, 2), np.nan)
     corners[labels[:, 1], labels[:, 0]] = q + off
-    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced)
+    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced,
+                       lowpass_sigma if refine.needs == "rotstar" else 0.0)

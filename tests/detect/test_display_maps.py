@@ -6,6 +6,8 @@ on a real monitor (doc/detector.md); then cameras that moved (a shift, a turn
 of the image) during the sequence.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -107,3 +109,18 @@ def test_a_camera_that_moved_is_caught_alone(still, motion):
 def test_few_poses_not_separable(still):
     c = dataset_offsets(dict(list(still.items())[:3]))
     assert c.offsets is None and "not separable" in c.summary() and c.moved(MAX_MOTION) == []
+
+
+def test_a_pose_is_refined_again_only_where_the_dataset_maps_differ_from_its_own(still):
+    """The second pass (detect.run.refine_with_dataset_maps) skips poses whose refinement used the same maps"""
+    from rotstar_mrcal.detect.run import REFINE_AGAIN_PX, maps_change_px
+
+    c = dataset_offsets(still)
+    s = dataclasses.replace(still["pose000"], applied=True)
+    own = (s.offsets, s.linear, s.centre)
+    assert maps_change_px(s, own) == 0.0
+    assert REFINE_AGAIN_PX < maps_change_px(s, c.refinement_maps()) < 0.02  # the pose's own maps' noise
+    s = dataclasses.replace(s, applied=False)  # its refinement used no maps: the display's are all to add
+    assert maps_change_px(s, c.refinement_maps()) > 0.5
+    zero = (np.zeros((8, 2)), np.zeros((8, 2, 2)), np.zeros(2))
+    assert maps_change_px(s, zero) == 0.0
