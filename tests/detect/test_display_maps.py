@@ -124,3 +124,31 @@ def test_a_pose_is_refined_again_only_where_the_dataset_maps_differ_from_its_own
     assert maps_change_px(s, c.refinement_maps()) > 0.5
     zero = (np.zeros((8, 2)), np.zeros((8, 2, 2)), np.zeros(2))
     assert maps_change_px(s, zero) == 0.0
+
+
+@pytest.mark.slow
+def test_tiny_renders_of_a_real_monitors_maps(tmp_path):
+    """End to end on tiny renders: whole-pixel shifts and one frame one display pixel taller, the same in every
+    pose: every still pose kept, the maps reported, a camera that moved 0.3 px skipped alone"""
+    import mrcal
+
+    from rotstar_mrcal.dataset import open_dataset
+    from rotstar_mrcal.detect.run import detect_dataset
+    from rotstar_mrcal.pattern.layout import make_layout
+    from rotstar_mrcal.simulate.camera import preset_model
+    from rotstar_mrcal.simulate.dataset import Settings, write_dataset
+    from rotstar_mrcal.simulate.display import parse_display_maps
+    from rotstar_mrcal.simulate.poses import random_poses
+
+    layout, model = make_layout(screen=(800, 600), pitch=100, band=24, identity=False), preset_model("pinhole-small")
+    rts = list(random_poses(model, layout, 5, np.random.default_rng(1), max_tilt_deg=35.0))
+    depth = mrcal.transform_point_rt(rts[0], layout.board_points()).reshape(-1, 3)[:, 2].mean()
+    move = np.repeat(rts[0][None], len(layout.frames()), axis=0)
+    move[4:, 3] += 0.3 * depth / model.intrinsics()[1][0]
+    maps = parse_display_maps("2:0,2;3:0,1,0,1px@bottom;4:0,1;5:0,-1;6:0,1;7:0,1", 8, (800, 600))
+    seq = str(tmp_path / "seq")
+    write_dataset(seq, layout, model, rts + [move], Settings(supersample=2, seed=1), display_maps=maps)
+    d = detect_dataset(open_dataset(seq)).cameras[0]
+    assert [r.pose for r in d.found] == [f"pose{i:03d}" for i in range(5)], [r.error for r in d.results]
+    assert [r.pose for r in d.rejected] == ["pose005"] and "camera moved" in d.rejected[0].error
+    assert d.display.significant() and d.display.linear[3, 1, 1] == pytest.approx(1 / 600 * 7 / 8, rel=0.1)
