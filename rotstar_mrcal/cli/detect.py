@@ -186,7 +186,8 @@ def say_checks(a, det) -> None:
         for r in d.rejected:
             say(f"{r.pose}: skipped: {r.error}")
         if a.refine == "symmetric" and not (multi and a.quiet):
-            say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{d.display.summary()}")
+            for line in d.display.summary().split("\n"):
+                say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{line}")
     for pose, why in det.disagree.items():
         say(f"{pose}: skipped in every camera: {why}")
 

@@ -237,10 +237,11 @@ class DisplayCheck:
         return [p for p, m in self.motion_px.items() if m > max_motion]
 
     def frame_lines(self) -> list[str]:
-        """One line per frame: the shift at the board's centre (display px), scale x / y, turn, shear (ppm)"""
+        """One line per frame, relative to frame 0: the shift at the board's centre (display px), scale x / y,
+        turn, shear (ppm)"""
         lin = np.zeros((len(self.offsets), 2, 2)) if self.linear is None else self.linear
         out = []
-        for k, ((x, y), L) in enumerate(zip(self.offsets, lin * 1e6)):
+        for k, ((x, y), L) in enumerate(zip(self.offsets - self.offsets[0], (lin - lin[0]) * 1e6)):
             out.append(f"frame {k}: shift ({x:+.2f}, {y:+.2f}) display px, "
                        f"scale x {L[0, 0]:+.0f} y {L[1, 1]:+.0f} ppm, turn {(L[1, 0] - L[0, 1]) / 2:+.0f} ppm, "
                        f"shear {(L[1, 0] + L[0, 1]) / 2:+.0f} ppm")
@@ -253,8 +254,8 @@ class DisplayCheck:
         if not self.significant():
             return (f"display maps: none (the most a frame is moved: {self.largest():.3f} display px over "
                     f"{self.poses} poses; the estimate's noise {self.noise:.3f})")
-        return (f"display maps (per frame, the same in all {self.poses} poses; a pixel-exact player on a good "
-                f"screen shows none: check the player and the screen's scaling):\n  " + "\n  ".join(self.frame_lines()))
+        return (f"display maps (per frame relative to frame 0, the same in all {self.poses} poses; a pixel-exact "
+                f"player on a good screen shows none: check the player and the screen's scaling):\n  " + "\n  ".join(self.frame_lines()))
 
     def refinement_maps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(offsets, linear, centre) for the joint refinement: the maps, or zeros when they are not significant"""
@@ -294,3 +295,19 @@ def dataset_offsets(shifts: dict) -> DisplayCheck:
     motion = {p: s.residual_px if p not in dev else max(largest_pair_distance(dev[p] * s.px_per_display),
                                                         s.residual_px) for p, s in shifts.items()}
     return DisplayCheck(off, motion, len(good), noise, lin, centre, widest)
+
+
+def still_display(shifts: dict, max_motion: float = MAX_MOTION) -> DisplayCheck:
+    """dataset_offsets, then the maps again from the poses it did not find moved (their motion verdicts kept)
+
+    A camera that moved pulls the median maps of a few poses; the display is
+    what the still poses show. With fewer than MIN_POSES still poses the maps
+    are not given (offsets None), the verdicts are.
+    """
+    first = dataset_offsets(shifts)
+    moved = set(first.moved(max_motion))
+    if not moved or first.offsets is None:
+        return first
+    still = dataset_offsets({p: s for p, s in shifts.items() if p not in moved})
+    return dataclasses.replace(still, motion_px=first.motion_px)
+

@@ -38,7 +38,8 @@ Every camera is detected alike (one camera is a rig of one, its pose folders
 'poseNNN'; a rig's are 'poseNNN/camera-K'). Poses are detected independently
 (in worker processes with jobs > 1); the display maps (one affine map per
 frame in screen coordinates) are then estimated per camera over its poses
-that gave a board (display_offsets.dataset_offsets), a pose whose frames
+that gave a board (display_offsets.still_display: the median over the poses,
+then again over those found still), a pose whose frames
 moved differently from the others is rejected as a camera that moved during
 the sequence, with how far it moved, and (rotstar's corners, four poses or
 more) every other pose's joint refinement is run again with the dataset's
@@ -70,7 +71,7 @@ from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.peers.registry import PoseImages, method
 from rotstar_mrcal.vnl import mrcal_can_read, mrcal_keeps
 from rotstar_mrcal.detect.display_offsets import (
-    MAX_MOTION, DisplayCheck, FrameShifts, dataset_offsets, map_displacement,
+    MAX_MOTION, DisplayCheck, FrameShifts, map_displacement, still_display,
 )
 from rotstar_mrcal.detect.pipeline import PoseCorners, detect_pose, refine_with_maps
 from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner
@@ -204,7 +205,7 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
 
     results = [done[p] for p in poses]
     shifts = {r.pose: r.corners.shifts for r in results if r.found and r.corners.shifts is not None}
-    display = dataset_offsets(shifts)
+    display = still_display(shifts, max_motion)
     for r in results:
         if r.pose in display.motion_px:
             r.corners.motion_px = display.motion_px[r.pose]

@@ -77,7 +77,7 @@ def test_still_poses_kept_and_the_maps_reported(still):
     assert np.abs(c.offsets - OFFSETS).max() < 0.02 and np.abs(c.linear - LIN0).max() < 20e-6
     text = c.summary()
     assert "display maps (per frame" in text and "frame 3: shift" in text and "ppm" in text
-    assert " y +5" in text.splitlines()[4]  # frame 3: +560 ppm about the mean
+    assert " y +6" in text.splitlines()[4] and "(+0.00, +0.00)" in text.splitlines()[1]  # frame 3: +640 ppm
     assert c.as_dict()["linear"][3][1][1] == pytest.approx(560e-6, abs=20e-6)
 
 
@@ -104,6 +104,21 @@ def test_a_camera_that_moved_is_caught_alone(still, motion):
     assert c.moved() == ["pose008"], c.motion_px
     if "image_shift" in motion:
         assert 0.8 * 0.3 < c.motion_px["pose008"] < 1.25 * 0.3
+
+
+def test_the_display_is_what_the_still_poses_show(still):
+    """Moved poses are left out of the maps (their verdicts kept); too few still poses: no maps"""
+    from rotstar_mrcal.detect.display_offsets import still_display
+
+    rng = np.random.default_rng(5)
+    poses = dict(still)
+    poses.update({f"moved{i}": pose(rng, turn=np.radians(0.2)) for i in range(3)})
+    c = still_display(poses)
+    assert sorted(c.moved()) == ["moved0", "moved1", "moved2"] and c.poses == 8
+    assert np.abs(c.linear - LIN0).max() < 20e-6
+    few = dict(list(still.items())[:3]) | {f"moved{i}": poses[f"moved{i}"] for i in range(2)}
+    c = still_display(few)
+    assert sorted(c.moved()) == ["moved0", "moved1"] and c.offsets is None and "not separable" in c.summary()
 
 
 def test_few_poses_not_separable(still):
