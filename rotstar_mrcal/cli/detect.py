@@ -71,8 +71,8 @@ def parse_args(argv=None):
                    help="write a weight column (1/sigma of each corner, normalised to median 1) "
                         "for mrcal's --corners-cache-has-weights")
     p.add_argument("--max-motion", type=number_arg(float, 0, lo_open=True), default=MAX_MOTION,
-                   help="reject a pose whose frames disagree by more than this many pixels "
-                        "(the camera moved during the sequence; default 0.15)")
+                   help="reject a pose whose frames disagree by more than this many pixels beyond the "
+                        "screen's per-frame display maps (the camera moved during the sequence; default 0.15)")
     p.add_argument("--jobs", "-j", type=number_arg(int, 1), default=1, help="poses processed in parallel (default 1)")
     p.add_argument("--no-hint", action="store_true", help=argparse.SUPPRESS)  # rotstar-calibrate runs its own
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines (skipped poses are still reported)")
@@ -180,7 +180,7 @@ def progress_line(a, layout, progress: Progress, r) -> None:
 
 
 def say_checks(a, det) -> None:
-    """The dataset's checks: poses whose camera moved, the display offsets, boards labelled unlike"""
+    """The dataset's checks: poses whose camera moved, the display maps, boards labelled unlike"""
     multi = det.dataset.multi_camera
     for k, d in det.cameras.items():
         for r in d.rejected:
