@@ -304,8 +304,9 @@ def process_segmented(ds: OutputDataset, pose: str, pattern: dict, layout, seg, 
     display = ds.display
     motion = display.motion_px.get(pose, r.motion_px)
     entry.update(ok=True, folder=folder, motion_px=motion,
-                 display_offsets=None if display.offsets is None else display.offsets.tolist())
+                 display_offsets=None if display.offsets is None else display.offsets.tolist(),
+                 display_maps=display.as_dict())
     state = board_state(r.corners)
     messages += [f"{ds.what(pose)}: board {state} ({r.n_valid}/{total}), frames agree to {motion:.3f} px beyond "
-                 f"the display's offsets; {coverage.describe(counts)}", display.summary()]
+                 f"the display's maps; {coverage.describe(counts)}", display.summary()]
     return PoseOutcome(True, messages, folder)

@@ -80,8 +80,8 @@ def parse_args(argv=None):
                         "DIR/blur_map.csv and DIR/blur_map.png (width, elongation, coma over the imager; "
                         "doc/blur-map.md)")
     p.add_argument("--max-motion", type=number_arg(float, 0, lo_open=True), default=MAX_MOTION,
-                   help="reject a pose whose frames disagree by more than this many pixels "
-                        "(the camera moved during the sequence; default 0.15)")
+                   help="reject a pose whose frames disagree by more than this many pixels beyond the "
+                        "screen's per-frame display maps (the camera moved during the sequence; default 0.15)")
     p.add_argument("--jobs", "-j", type=number_arg(int, 1), default=1, help="poses processed in parallel (default 1)")
     p.add_argument("--no-hint", action="store_true", help=argparse.SUPPRESS)  # rotstar-calibrate runs its own
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines (skipped poses are still reported)")
@@ -212,13 +212,14 @@ def say_blur_map(outdir, det) -> None:
 
 
 def say_checks(a, det) -> None:
-    """The dataset's checks: poses whose camera moved, the display offsets, boards labelled unlike"""
+    """The dataset's checks: poses whose camera moved, the display maps, boards labelled unlike"""
     multi = det.dataset.multi_camera
     for k, d in det.cameras.items():
         for r in d.rejected:
             say(f"{r.pose}: skipped: {r.error}")
         if REFINERS[a.refine].needs == "rotstar" and not (multi and a.quiet):
-            say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{d.display.summary()}")
+            for line in d.display.summary().split("\n"):
+                say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{line}")
     for pose, why in det.disagree.items():
         say(f"{pose}: skipped in every camera: {why}")
 

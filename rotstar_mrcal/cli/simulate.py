@@ -36,6 +36,7 @@ from rotstar_mrcal.pattern.layout import make_layout
 PAPER_SEQUENCE = dict(phase_period=150, star_segments=16)  # rotstar-pattern --paper-sequence's defaults (pitch 150)
 from rotstar_mrcal.simulate.camera import PRESETS, preset_model
 from rotstar_mrcal.simulate.dataset import Settings, write_dataset
+from rotstar_mrcal.simulate.display import parse_display_maps
 from rotstar_mrcal.simulate.poses import default_distance_range, random_poses
 from rotstar_mrcal.optics.wavefront import TERMS, Seidel
 from rotstar_mrcal.optics.refraction import DEFAULT_INDEX
@@ -217,6 +218,12 @@ def _pose_arguments(p) -> None:
                    help="show each rotating-star frame displaced on the screen, the same in every pose (a "
                         "player or screen that is not pixel-exact): 'x0,y0,x1,y1,...' display pixels per "
                         "frame, or 'random:A' for offsets uniform in a disc of radius A (seeded by --seed)")
+    p.add_argument("--display-map", metavar="SPEC", default=None,
+                   help="show chosen rotating-star frames shifted, scaled or stretched, the same in every pose: "
+                        "'K:DX,DY[,SX,SY][@ANCHOR];...' with K the frame (0-based), DX, DY display px, SX, SY the "
+                        "stretch in ppm or in display px over the screen with a 'px' suffix, ANCHOR the point kept "
+                        "(center, top, bottom, left, right, top-left, ...); e.g. '2:0,2;3:0,1,0,1px@bottom' "
+                        "(frame 3 one display px taller, its bottom kept); composed after --display-offsets")
     p.add_argument("--jobs", type=int, default=1, help="render poses in this many processes (results do not depend on it)")
     p.add_argument("--force", action="store_true", help="write into a folder that already holds a dataset")
 
@@ -246,10 +253,10 @@ def _check_recording(p, args) -> None:
     if (args.out is None) == (args.recording is None):
         p.error("give --out SEQ (a dataset) or --recording REC.npy (a recording of the player), not both" if
                 args.out else "--out SEQ is needed (or --recording REC.npy)")
-    if args.recording and (args.rig or args.display_offsets or args.screen_png or args.force or args.shot or args.black
-                           or args.value_bits or args.glass):
+    if args.recording and (args.rig or args.display_offsets or args.display_map or args.screen_png or args.force
+                           or args.shot or args.black or args.value_bits or args.glass):
         p.error("--recording takes a single camera and the sensor's gain, noise and bits; drop --rig, "
-                "--display-offsets, --screen-png, --shot, --black, --value-bits, --glass and --force")
+                "--display-offsets, --display-map, --screen-png, --shot, --black, --value-bits, --glass and --force")
     if args.recording and not args.pattern:
         p.error("--recording needs --pattern DIR: the pattern folder player.html shows (rotstar-pattern --out DIR)")
     if args.recording and not args.recording.endswith(".npy"):
@@ -282,8 +289,8 @@ def _check_combinations(p, args) -> None:
         args.blur = 0.0 if args.seidel is not None else 1.0
     if args.rgb and not args.rig:
         p.error("--rgb adds the colour camera of a --rig")
-    if args.rig and args.display_offsets:
-        p.error("--display-offsets is not simulated for a --rig")
+    if args.rig and (args.display_offsets or args.display_map):
+        p.error("--display-offsets and --display-map are not simulated for a --rig")
     if args.rig and args.camera != p.get_default("camera"):
         p.error("--camera and --rig exclude each other: the rig defines its cameras")
     if not all(math.isfinite(v) for v in (args.blur, args.noise, args.shot, args.gain, args.black, args.room,
@@ -316,6 +323,13 @@ def display_offsets(spec: str | None, n: int, seed: int) -> np.ndarray | None:
     if v.size != 2 * n or not np.isfinite(v).all():
         raise ValueError(f"--display-offsets {spec!r}: need {2 * n} finite numbers, x and y for each of {n} frames")
     return v.reshape(n, 2)
+
+
+def display_flaws(args, layout) -> dict:
+    """write_dataset's display_offsets and display_maps from --display-offsets and --display-map (None: none)"""
+    return {"display_offsets": display_offsets(args.display_offsets, layout.nframes, args.seed),
+            "display_maps": None if args.display_map is None else
+            parse_display_maps(args.display_map, layout.nframes, (layout.screen_width, layout.screen_height))}
 
 
 def display_gamma(pattern: dict, where: str) -> float:
@@ -419,6 +433,7 @@ def _main(argv=None) -> int:
             check_output_path(args.recording)
             return _recording(args, layout, model, camera, encoded, say)
         _check_out(args)
+        flaws = display_flaws(args, layout)
     except (DatasetError, ValueError) as e:
         fail(str(e))
     try:
@@ -432,7 +447,7 @@ def _main(argv=None) -> int:
         )
         if args.rig:
             return _rig(args, layout, frames, cams, distance, say, gammas)
-        _one_camera(args, layout, frames, model, camera, distance, say, gammas)
+        _one_camera(args, layout, frames, model, camera, distance, say, gammas, flaws)
     except (DatasetError, ValueError, RuntimeError, OSError) as e:
         fail(f"error: {e}", EXIT_FAILED)
     out_line(args.out)
@@ -460,14 +475,14 @@ def _check_out(args) -> None:
         fail(f"{args.out} already holds a simulated dataset (use --force to overwrite)")
 
 
-def _one_camera(args, layout, frames, model, camera: str, distance, say, gammas: dict) -> None:
+def _one_camera(args, layout, frames, model, camera: str, distance, say, gammas: dict, flaws: dict) -> None:
     """One camera: --poses random poses rendered into the dataset --out"""
     rts = random_poses(model, layout, args.poses, np.random.default_rng([0, args.seed]), distance=distance,
                        max_tilt_deg=args.max_tilt, margin_px=args.margin)
     write_dataset(
         args.out, layout, model, rts, settings_of(args), frames=frames,
         psf=None if args.seidel is None else LensPSF(args.seidel, model.imagersize()), jobs=args.jobs,
-        display_offsets=display_offsets(args.display_offsets, layout.nframes, args.seed), progress=say,
+        progress=say, **flaws,
         extra={"camera": camera, "screen": "png" if args.screen_png else "exact", **gammas,
                "distance_m": list(distance), "max_tilt_deg": args.max_tilt,
                "margin_px": args.margin if args.margin is not None else 0.02 * float(model.imagersize()[0])})

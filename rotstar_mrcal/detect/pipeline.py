@@ -20,7 +20,7 @@ by_graph), so that boards partly out of view give the corners in view; with the 
 name what went wrong: exposure, the border bands' colour frame by frame
 (sequence.py: frames out of order), the element count (too small, hidden,
 out of view), the stars' angles (indexing.frame_angles: order, mirror), and
-the per-frame display offsets and motion (display.py). Each stage is a pure
+the per-frame display maps and motion (display_offsets.py). Each stage is a pure
 function in its own module; this one strings them together and turns their
 failures into a reason. A board whose labelling is not certain is never
 returned: it is skipped with the reason.
@@ -71,7 +71,7 @@ import numpy as np
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.detect.consistency import refined_consistency
 from rotstar_mrcal.detect.display_offsets import (
-    MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian,
+    MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian, map_displacement,
 )
 from rotstar_mrcal.detect.edgespread import BLUR_FIELDS, blur_columns
 from rotstar_mrcal.detect.elements import by_graph, by_identity
@@ -88,10 +88,11 @@ class PoseCorners:
     sigma: np.ndarray | None = None  # (ny, nx) rms residual of the refinement
     cov: np.ndarray | None = None  # (ny, nx, 2, 2) corner covariance estimate, px^2
     window: np.ndarray | None = None  # (ny, nx) refinement half-window used
-    motion_px: float = 0.0  # frame-to-frame disagreement that display offsets do not explain, px
-    shifts: FrameShifts | None = None  # per-frame display offsets of this pose (symmetric refinement)
+    motion_px: float = 0.0  # frame-to-frame disagreement that the display maps do not explain, px
+    shifts: FrameShifts | None = None  # per-frame display maps of this pose (symmetric refinement)
     unplaced: list | None = None  # why, for each element seen whose identity was not read
     blur: np.ndarray | None = None  # (ny, nx, len(BLUR_FIELDS)) the local PSF per corner (detect_pose(blur_map=True))
+    prefilter_px: float = 0.0  # the Gaussian low-pass (px) the symmetric refinement ran on
 
     @property
     def found(self) -> bool:
@@ -201,23 +202,36 @@ def prefilter(frames: np.ndarray, sigma: float = PREFILTER_SIGMA) -> np.ndarray:
     if sigma <= 0:
         return frames
     return np.stack([cv2.GaussianBlur(f, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE) for f in frames])
-SHIFT_MIN_PX = 0.02  # display offsets below this (camera px) are not modelled in the refinement
+SHIFT_MIN_PX = 0.02  # display maps that move no corner by this much (camera px) are not modelled in the refinement
 
 
-def refine_with_display_offsets(frames, res, rough, labels, w, pitch) -> tuple:
-    """(Refined, FrameShifts): each frame's displacement measured (display.py), then refined with it modelled
+def board_centre(layout: Layout) -> np.ndarray:
+    """(2,) display px, relative to corner (0, 0): the centre of the grid of corners, where display maps apply
+
+        >>> from rotstar_mrcal.pattern.layout import make_layout
+        >>> board_centre(make_layout(screen=(800, 600), pitch=100, band=24)).tolist()
+        [250.0, 150.0]
+    """
+    return np.array([(layout.nx - 1) / 2, (layout.ny - 1) / 2]) * float(layout.pitch)
+
+
+def refine_with_display_offsets(frames, res, rough, labels, w, pitch, centre=None) -> tuple:
+    """(Refined, FrameShifts): each frame's display map measured (display_offsets.py), then refined with it modelled
 
     res: the joint refinement of the corners (labels (N, 2), rough starts
-    (N, 2), windows w (N,)); pitch: display pixels per grid step. The second
-    refinement runs only when the offsets move a corner by SHIFT_MIN_PX or more.
+    (N, 2), windows w (N,)); pitch: display pixels per grid step; centre:
+    the board's centre, display px. The second refinement runs only when the
+    maps move a corner by SHIFT_MIN_PX or more.
     """
     idx, per = per_frame_corners(frames, res.corners, w, res.ok)
     H = grid_homography(res.corners[res.ok], labels[res.ok], pitch)
-    jac = homography_jacobian(H, labels * float(pitch))
-    shifts = frame_shifts(per, res.corners[idx], labels[idx], pitch, jac[idx])
-    img = shifts.image_shifts(jac)
+    uv = labels * float(pitch)
+    jac = homography_jacobian(H, uv)
+    shifts = frame_shifts(per, res.corners[idx], labels[idx], pitch, jac[idx], centre)
+    img = shifts.image_shifts(jac, uv)
     if np.abs(img).max() > SHIFT_MIN_PX:
         res = symmetric_refine(frames, np.where(res.ok[:, None], res.corners, rough), w, shifts=img)
+        shifts.applied = True
     return res, shifts
 
 
@@ -229,8 +243,38 @@ def image_shifts(shifts: FrameShifts | None, corners: np.ndarray, labels: np.nda
     if ok.sum() < 4:
         return None
     jac = homography_jacobian(grid_homography(corners[ok], labels[ok], pitch), labels * float(pitch))
-    img = shifts.image_shifts(jac)
+    img = shifts.image_shifts(jac, labels * float(pitch))
     return img if np.abs(img).max() > SHIFT_MIN_PX else None
+
+
+def refine_with_maps(frames: np.ndarray, layout: Layout, r: PoseCorners, offsets, linear, centre) -> PoseCorners:
+    """r's corners refined again on frames with given display maps (a dataset's) instead of the pose's own
+
+    offsets (nframes, 2), linear (nframes, 2, 2), centre (2,): the maps, as
+    display_offsets.FrameShifts (zeros: the plain joint refinement). Only
+    corners r found are refined, in r's windows and on frames low-passed as
+    before; a corner whose second refinement fails keeps its first.
+    """
+    j, i = np.nonzero(np.isfinite(r.corners[..., 0]))
+    if len(i) < 4 or r.window is None:
+        return r
+    labels, q, w = np.column_stack((i, j)), r.corners[j, i], r.window[j, i]
+    H, W = frames.shape[1:]
+    m = int(np.ceil(np.max(w))) + 4
+    x0, y0 = np.maximum(np.floor(q.min(axis=0)).astype(int) - m, 0)
+    x1, y1 = np.minimum(np.ceil(q.max(axis=0)).astype(int) + m + 1, (W, H))
+    off = np.array([x0, y0], float)
+    lowpass = prefilter(np.asarray(frames, np.float32)[:, y0:y1, x0:x1], r.prefilter_px)
+    uv = labels * float(layout.pitch)
+    jac = homography_jacobian(grid_homography(q, labels, layout.pitch), uv)
+    img = np.einsum("nab,knb->kna", jac, map_displacement(offsets, linear, centre, uv))
+    res = symmetric_refine(lowpass, q - off, w, shifts=img)
+    corners, sigma, cov = r.corners.copy(), r.sigma.copy(), r.cov.copy()
+    k = res.ok
+    corners[j[k], i[k]] = res.corners[k] + off
+    sigma[j[k], i[k]] = res.sigma[k]
+    cov[j[k], i[k]] = res.cov[k]
+    return dataclasses.replace(r, corners=corners, sigma=sigma, cov=cov)
 
 
 def detect_pose(
@@ -294,16 +338,18 @@ def detect_pose(
     cov = np.full((layout.ny, layout.nx, 2, 2), np.nan)
     motion = 0.0
     shifts = None
-    if refine.needs == "rotstar":  # the paper's symmetric refinement, display offsets and motion check
-        lowpass = prefilter(frames, min(prefilter_sigma, PREFILTER_PER_WINDOW * float(np.median(w))))
+    if refine.needs == "rotstar":  # the paper's symmetric refinement, display maps and motion check
+        lowpass_sigma = min(prefilter_sigma, PREFILTER_PER_WINDOW * float(np.median(w)))
+        lowpass = prefilter(frames, lowpass_sigma)
         res = symmetric_refine(lowpass, rough, w)
         if check_motion and res.ok.sum() >= 4:
-            res, shifts = refine_with_display_offsets(lowpass, res, rough, labels, w, layout.pitch)
+            res, shifts = refine_with_display_offsets(lowpass, res, rough, labels, w, layout.pitch,
+                                                      board_centre(layout))
             motion = shifts.residual_px
             if motion > max_motion:
                 return _fail(layout, f"frames do not align: the camera moved during the sequence "
-                                     f"(the frames turn or scale against each other by {motion:.2f} px, "
-                                     f"limit {max_motion})")
+                                     f"(the frames bend against each other by {motion:.2f} px beyond what one "
+                                     f"affine map per frame explains, limit {max_motion})")
         q, ok = res.corners, res.ok
         if refine.correct is not None:  # e.g. the PSF-aware refiner: from the symmetric corner to the light's
             q = refine.correct(frames, q, w, image_shifts(shifts, q, labels, layout.pitch))
@@ -342,4 +388,5 @@ def detect_pose(
     if blur_map:
         blur = np.full((layout.ny, layout.nx, len(BLUR_FIELDS)), np.nan)
         blur[labels[:, 1], labels[:, 0]] = blur_columns(frames, q, w)
-    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced, blur)
+    return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced, blur,
+                       lowpass_sigma if refine.needs == "rotstar" else 0.0)

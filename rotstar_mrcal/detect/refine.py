@@ -336,7 +336,7 @@ class Refiner:
     """A corner refiner: start corners (N, 2) on frames (K, H, W) -> (N, 2), NaN = failed
 
     needs 'rotstar': the rotating-star frames jointly (detect_pose runs the
-    symmetric refinement with its display offsets and motion check);
+    symmetric refinement with its display maps and motion check);
     'checkerboard': the checkerboard frame, one image at a time. The peers'
     refiners and the table of all of them are in peers.registry (REFINERS).
     """

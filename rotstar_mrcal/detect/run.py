@@ -1,4 +1,4 @@
-"""A whole dataset, one camera or several: every pose detected, the display offsets, the mrcal command
+"""A whole dataset, one camera or several: every pose detected, the display maps, the mrcal command
 
 SYNOPSIS
 
@@ -36,10 +36,15 @@ A pose that gives no board says why:
 
 Every camera is detected alike (one camera is a rig of one, its pose folders
 'poseNNN'; a rig's are 'poseNNN/camera-K'). Poses are detected independently
-(in worker processes with jobs > 1); the display offsets are then estimated
-per camera over its poses that gave a board (display_offsets.dataset_offsets)
-and a pose whose frames moved differently from the others is rejected as a
-camera that moved during the sequence, with how far it moved. With several
+(in worker processes with jobs > 1); the display maps (one affine map per
+frame in screen coordinates) are then estimated per camera over its poses
+that gave a board (display_offsets.still_display: the median over the poses,
+then again over those found still), a pose whose frames
+moved differently from the others is rejected as a camera that moved during
+the sequence, with how far it moved, and (rotstar's corners, four poses or
+more) every other pose's joint refinement is run again with the dataset's
+maps instead of its own noisier ones (zero maps when they are not
+significant: the plain joint refinement). With several
 cameras, each pose's boards are checked to be labelled alike in every camera
 (rig.check_labelling); a pose that is not is dropped from every camera. The
 focal seed and the command come from the boards mrcal keeps
@@ -60,13 +65,15 @@ import numpy as np
 
 from rotstar_mrcal.calibrate.focal import estimate_focal
 from rotstar_mrcal.calibrate.command import LEAN_LENSMODEL, command_line, hint_command, rig_argv, rig_globs
-from rotstar_mrcal.dataset import Dataset, DatasetError, Pose, load_pose, pattern_file
+from rotstar_mrcal.dataset import Dataset, DatasetError, Pose, load_pose, pattern_file, read_image
 from rotstar_mrcal.parallel import process_map
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.peers.registry import PoseImages, method
 from rotstar_mrcal.vnl import mrcal_can_read, mrcal_keeps
-from rotstar_mrcal.detect.display_offsets import MAX_MOTION, DisplayCheck, dataset_offsets
-from rotstar_mrcal.detect.pipeline import PoseCorners, detect_pose
+from rotstar_mrcal.detect.display_offsets import (
+    MAX_MOTION, DisplayCheck, FrameShifts, map_displacement, still_display,
+)
+from rotstar_mrcal.detect.pipeline import PoseCorners, detect_pose, refine_with_maps
 from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner
 from rotstar_mrcal.detect.rig import MAX_TURN_DEG, check_labelling
 
@@ -136,7 +143,7 @@ def detect_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, 
 def started_from_rotstar(name: str, r: PoseCorners, p: Pose, layout: Layout) -> PoseCorners:
     """rotstar's corners r of pose p moved by method `name` (methods.METHODS, start='rotstar'), rotstar's windows
 
-    The result keeps rotstar's windows, display offsets and motion (the
+    The result keeps rotstar's windows, display maps and motion (the
     dataset's motion check), and has the method's per-corner reasons; no
     covariance (--weights are rotstar's).
     """
@@ -201,16 +208,52 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
 
     results = [done[p] for p in poses]
     shifts = {r.pose: r.corners.shifts for r in results if r.found and r.corners.shifts is not None}
-    display = dataset_offsets(shifts)
+    display = still_display(shifts, max_motion)
     for r in results:
         if r.pose in display.motion_px:
             r.corners.motion_px = display.motion_px[r.pose]
     rejected = [r for r in results if r.pose in display.moved(max_motion)]
+    # the second pass is the symmetric joint refinement; a refiner that corrects its corners (the PSF-aware one)
+    # keeps each pose's own maps
+    if method == "rotstar" and refine.needs == "rotstar" and refine.correct is None and display.offsets is not None:
+        moved = {r.pose for r in rejected}
+        refine_with_dataset_maps(ds, [r for r in results if r.found and r.pose not in moved], display, jobs)
     for r in rejected:
         r.error = (f"frames do not align: the camera moved during the sequence (its frames moved "
-                   f"{r.corners.motion_px:.2f} px against each other beyond the screen's own offsets, "
+                   f"{r.corners.motion_px:.2f} px against each other beyond the screen's own maps, "
                    f"limit {max_motion})")
     return DatasetCorners(ds.path, ds.layout, ds.pattern, results, display, rejected)
+
+
+REFINE_AGAIN_PX = 0.002  # a pose is refined again when the dataset's maps move a frame's corner this much more
+
+
+def refine_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, corners: PoseCorners,
+               maps: tuple) -> tuple[str, PoseCorners]:
+    """(pose, its corners refined again with the dataset's display maps) (a worker)"""
+    files = [os.path.join(seq, pose, f["file"]) for f in pattern_frames if f["kind"] == "rotstar"]
+    frames = np.stack([read_image(fn)[0] for fn in files])
+    return pose, refine_with_maps(frames, layout, corners, *maps)
+
+
+def maps_change_px(shifts: FrameShifts, maps: tuple) -> float:
+    """Camera px by which maps (offsets, linear, centre) move a frame's corner beyond what the pose's refinement used"""
+    used = shifts.displacement(shifts.uv) if shifts.applied else 0.0
+    return float(np.abs(map_displacement(*maps, shifts.uv) - used).max()) * shifts.px_per_display
+
+
+def refine_with_dataset_maps(ds: Dataset, results: list[PoseResult], display: DisplayCheck, jobs: int) -> None:
+    """The poses' joint refinement run again with the dataset's display maps (less noisy than a pose's own)
+
+    Only the poses for which the maps differ by REFINE_AGAIN_PX or more from
+    those their refinement used (on a clean display: none).
+    """
+    maps = display.refinement_maps()
+    todo = {r.pose: r for r in results if r.corners.shifts is not None and np.isfinite(r.corners.shifts.px_per_display)
+            and maps_change_px(r.corners.shifts, maps) >= REFINE_AGAIN_PX}
+    args = [(ds.path, r.pose, ds.frames, ds.layout, r.corners, maps) for r in todo.values()]
+    for pose, corners in process_map(refine_one, args, jobs):
+        todo[pose].corners = corners
 
 
 @dataclasses.dataclass

@@ -41,7 +41,7 @@ def _detect_pose(seq, pose, layout, methods):
 
 
 def moved_poses(res: dict, max_motion: float = MAX_MOTION) -> list[str]:
-    """Poses whose rotating-star frames moved against the dataset's display offsets (detect.display)"""
+    """Poses whose rotating-star frames moved against the dataset's display maps (detect.display_offsets)"""
     shifts = {}
     for p, (_, _, _, found) in res.items():
         f = found.get("rotstar") or found.get("rotstar-weighted")
@@ -75,7 +75,7 @@ def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1, pro
         res[p] = (*res[p][:3], {m: Found(None, None, "camera moved during the sequence") for m in res[p][3]})
         if log:
             log(f"{p}: skipped: frames do not align: the camera moved during the sequence (beyond the "
-                "display's offsets over the dataset)")
+                "display's maps over the dataset)")
     out = {}
     for m in methods:
         boards, weights = [], []

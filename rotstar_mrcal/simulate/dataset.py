@@ -61,6 +61,7 @@ from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.simulate.camera import RayGrid, camera_rays, remember_rays
 from rotstar_mrcal.simulate.exposure import expose
 from rotstar_mrcal.simulate.blur import describe_psf
+from rotstar_mrcal.simulate.display import centred_maps, homogeneous, identity_maps, offset_maps, show_frames
 from rotstar_mrcal.simulate.irradiance import render_irradiance
 from rotstar_mrcal.simulate.screen import Screen, exact_frames, make_screen
 
@@ -205,6 +206,7 @@ def write_dataset(
     progress=None,
     extra: dict | None = None,
     display_offsets=None,
+    display_maps=None,
 ) -> Truth:
     """Render, expose and write every pose; write and return the truth
 
@@ -215,9 +217,12 @@ def write_dataset(
     jobs > 1). progress(message) is called once per pose. extra: more entries
     for the truth's settings (e.g. the camera preset name).
     display_offsets: (n, 2) display pixels by which the screen shows each of
-    the n rotating-star frames displaced (the same in every pose; a player or
-    screen that is not pixel-exact); the truth is the board at their mean,
-    the position the joint refinement measures.
+    the n rotating-star frames displaced; display_maps: (n, 2, 3) affine
+    maps, display px, by which it shows them shifted, scaled or stretched
+    (simulate.display; composed after the offsets). Both are the same in
+    every pose (a player or screen that is not pixel-exact); the truth is
+    the board at the maps' mean (display.centred_maps), the position the
+    joint refinement measures.
     """
     rts = [np.asarray(r, float) for r in rt_cam_board]
     nfr = len(layout.frames())
@@ -225,10 +230,12 @@ def write_dataset(
         if r.shape not in ((6,), (nfr, 6)):
             raise ValueError(f"a pose must be (6,) or ({nfr}, 6), not {r.shape}")
     names = pose_names(len(rts))
-    shown = [displayed_poses(r, layout, display_offsets) for r in rts]
     frames = exact_frames(layout) if frames is None else np.asarray(frames, np.float32)
     if frames.shape[0] != nfr:
         raise ValueError(f"{frames.shape[0]} screen frames for the layout's {nfr}")
+    maps = frame_maps(layout, display_offsets, display_maps)
+    if maps is not None:
+        frames = show_frames(frames, maps)
 
     os.makedirs(seq, exist_ok=True)
     ds.write_pattern(seq, layout)
@@ -243,6 +250,7 @@ def write_dataset(
             "psf": describe_psf(settings.blur_px if psf is None else psf),
             **(extra or {}),
             **({} if display_offsets is None else {"display_offsets": np.asarray(display_offsets, float).tolist()}),
+            **({} if display_maps is None else {"display_maps": np.asarray(display_maps, float).tolist()}),
         },
     )
     write_truth(seq, truth)
@@ -259,7 +267,7 @@ def write_dataset(
             progress(f"{name} ({done}/{len(names)}) {dt:.1f} s, {time.perf_counter() - t0:.0f} s total")
 
     try:
-        for r in process_map(_do_pose, [(seq, i, n, r) for i, (n, r) in enumerate(zip(names, shown))], jobs,
+        for r in process_map(_do_pose, [(seq, i, n, r) for i, (n, r) in enumerate(zip(names, rts))], jobs,
                              _setup, init):
             report(*r)
     finally:
@@ -267,36 +275,39 @@ def write_dataset(
     return truth
 
 
-def displayed_poses(rt_cam_board, layout: Layout, display_offsets=None) -> np.ndarray:
-    """The board pose of each frame as displayed: (6,) or (nframes, 6)
+def frame_maps(layout: Layout, display_offsets=None, display_maps=None) -> np.ndarray | None:
+    """(nframes, 2, 3) maps by which the screen shows every entry of layout.frames(), or None for none
 
-    A frame shown displaced by (du, dv) display pixels is the board moved by
-    (du, dv) * pixel_pitch_m in its own plane. Offsets are taken relative to
-    their mean; the frames of other kinds (the identity frames, the
-    checkerboard) are shown at the mean.
+    The rotating-star frames get the offsets, then the maps, both relative to
+    their mean (display.centred_maps); the frames of other kinds (the
+    identity frames, the checkerboard) are shown at the mean.
 
         >>> from rotstar_mrcal.pattern.layout import make_layout
-        >>> layout = make_layout(screen=(800, 600), pitch=100, band=24, pixel_pitch_m=0.001)
+        >>> layout = make_layout(screen=(800, 600), pitch=100, band=24)
         >>> off = np.zeros((8, 2)); off[1] = (2, 0)
-        >>> rt = displayed_poses(np.zeros(6), layout, off)   # 8 rotating-star, 10 identity frames, checkerboard
-        >>> rt.shape, rt[1, 3:].round(5).tolist(), rt[0, 3:].round(5).tolist()
-        ((19, 6), [0.00175, 0.0, 0.0], [-0.00025, 0.0, 0.0])
-        >>> bool(np.all(rt[8:] == 0))
-        True
+        >>> m = frame_maps(layout, off)                # 8 rotating-star, 10 identity frames, checkerboard
+        >>> m.shape, m[1, :, 2].tolist(), m[0, :, 2].tolist(), bool(np.all(m[8:] == np.eye(2, 3)))
+        ((19, 2, 3), [1.75, 0.0], [-0.25, 0.0], True)
     """
-    rt = np.asarray(rt_cam_board, float)
-    if display_offsets is None:
-        return rt
-    off = np.asarray(display_offsets, float)
+    if display_offsets is None and display_maps is None:
+        return None
     kinds = [f["kind"] for f in layout.frames()]
-    n = kinds.count("rotstar")
-    if off.shape != (n, 2):
-        raise ValueError(f"display offsets must be ({n}, 2), one per rotating-star frame, not {off.shape}")
-    off = off - off.mean(axis=0)
-    per = np.zeros((len(kinds), 6))
-    per[[k == "rotstar" for k in kinds], 3:5] = off * layout.pixel_pitch_m
-    base = np.broadcast_to(rt, (len(kinds), 6))
-    return mrcal.compose_rt(base, per)
+    star = np.array([k == "rotstar" for k in kinds])
+    n = int(star.sum())
+    rot = identity_maps(n)
+    if display_offsets is not None:
+        off = np.asarray(display_offsets, float)
+        if off.shape != (n, 2):
+            raise ValueError(f"display offsets must be ({n}, 2), one per rotating-star frame, not {off.shape}")
+        rot = offset_maps(off)
+    if display_maps is not None:
+        m = np.asarray(display_maps, float)
+        if m.shape != (n, 2, 3):
+            raise ValueError(f"display maps must be ({n}, 2, 3), one per rotating-star frame, not {m.shape}")
+        rot = (homogeneous(m) @ homogeneous(rot))[:, :2]
+    out = identity_maps(len(kinds))
+    out[star] = centred_maps(rot)
+    return out
 
 
 # ---- truth.json ---------------------------------------------------------------

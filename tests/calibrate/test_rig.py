@@ -303,7 +303,7 @@ def test_simulate_rig_arguments(tmp_path, capsys):
 
     for argv, msg in ((["--rgb"], "--rgb adds the colour camera of a --rig"),
                       (["--rig", "d435", "--camera", "wide"], "--camera and --rig exclude each other"),
-                      (["--rig", "d435", "--display-offsets", "random:1"], "--display-offsets is not simulated")):
+                      (["--rig", "d435", "--display-offsets", "random:1"], "--display-offsets and --display-map are not simulated")):
         with pytest.raises(SystemExit) as e:
             simulate.parse_args(["--out", str(tmp_path / "x"), *argv])
         assert e.value.code == 2 and msg in capsys.readouterr().err

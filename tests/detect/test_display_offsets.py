@@ -86,7 +86,7 @@ def test_display_offsets_estimated(offset_run):
     want = OFFSETS - OFFSETS.mean(axis=0)
     got = offset_run.display.offsets
     assert np.abs(got - want).max() < 0.1, (got, want)  # measured 0.01-0.02
-    assert "display offsets (display px" in offset_run.display.summary()
+    assert "display maps (per frame relative to frame 0" in offset_run.display.summary()
 
 
 def test_corners_as_accurate_as_without_offsets(offset_run, offset_seq, d435_seq):
