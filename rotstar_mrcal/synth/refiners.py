@@ -60,7 +60,9 @@ from rotstar_mrcal.peers.registry import REFINERS as WEDGE_REFINERS, refiner
 from rotstar_mrcal.peers.phase import phase_corners
 
 PHASE = "phase"
-REFINERS = tuple(WEDGE_REFINERS) + (PHASE,)
+REFINERS = tuple(n for n, r in WEDGE_REFINERS.items() if r.correct is None) + (PHASE,)
+"""The experiment's refiners: the registry's, but those that correct a whole pose's corners afterwards (psf: it
+reads the PSF from the edges of a pose, which the experiment's tiles are not), and phase"""
 FULL_SCALE = 255.0  # DN of the experiment's images (black 28, white 228): the phase finder's modulation scale
 
 
