@@ -106,7 +106,7 @@ def seidel_arg(spec: str) -> Seidel:
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="rotstar-simulate", description=DESCRIPTION, epilog=EPILOG,
                                 formatter_class=HelpFormatter)
-    for add in (_scene_arguments, _sensor_arguments, _pose_arguments, _recording_arguments):
+    for add in (_scene_arguments, _glass_arguments, _sensor_arguments, _pose_arguments, _recording_arguments):
         add(p)
     args = p.parse_args(argv)
     for check in (_check_recording, _check_values, _check_combinations):
@@ -143,12 +143,6 @@ def _scene_arguments(p) -> None:
         help="show the pattern PNGs of --pattern DIR (8-bit, decoded with the display gamma) "
         "instead of the exact linear frames",
     )
-    p.add_argument("--glass", type=number_arg(float, 0, 5), default=0.0, metavar="MM",
-                   help="a cover glass this thick (mm, 0-5) over the emitting layer: every camera ray is refracted at "
-                        "its surface on the way to the pixels (laminated tablets and phones: 0.5-1.5 mm); the truth "
-                        "stays the emitting layer (default 0: none)")
-    p.add_argument("--glass-index", type=number_arg(float, 1), default=DEFAULT_INDEX, metavar="N",
-                   help=f"refractive index of the --glass (>= 1; default {DEFAULT_INDEX})")
     p.add_argument("--camera", default="d435", metavar="NAME|FILE",
                    help=f"camera preset ({', '.join(PRESETS)}) or a .cameramodel file")
     p.add_argument("--rig", choices=list(RIGS), default=None,
@@ -158,6 +152,16 @@ def _scene_arguments(p) -> None:
     p.add_argument("--rgb", action="store_true", help="with --rig: add the colour camera (camera 2, grayscale, 8-bit)")
     p.add_argument("--poses", type=int, default=None, help="number of random poses (default 24; 1 with --recording)")
     p.add_argument("--seed", type=int, default=0, help="seed of the poses and of the noise")
+
+
+def _glass_arguments(p) -> None:
+    """A cover glass over the screen's pixels (optics.refraction)"""
+    p.add_argument("--glass", type=number_arg(float, 0, 5), default=0.0, metavar="MM",
+                   help="a cover glass this thick (mm, 0-5) over the emitting layer: every camera ray is refracted at "
+                        "its surface on the way to the pixels (laminated tablets and phones: 0.5-1.5 mm); the truth "
+                        "stays the emitting layer (default 0: none)")
+    p.add_argument("--glass-index", type=number_arg(float, 1), default=DEFAULT_INDEX, metavar="N",
+                   help=f"refractive index of the --glass (>= 1; default {DEFAULT_INDEX})")
 
 
 def _sensor_arguments(p) -> None:
