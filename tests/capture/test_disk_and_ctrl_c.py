@@ -213,7 +213,9 @@ def test_sigint_while_rotstar_simulate_writes_a_pose_leaves_no_part_of_it(record
     whole (all 19 frames of the pattern; one was left with some of them), no temporary folder"""
     out = tmp_path / "sim"
     p = subprocess.Popen([os.path.join(VENV_BIN, "rotstar-simulate"), "--out", str(out), "--camera", "pinhole-small",
-                          "--pattern", str(recording[0]), "--poses", "3", "--supersample", "1"],
+                          "--pattern", str(recording[0]), "--poses", "12", "--supersample", "1"],
+                         # 12 poses (0.3 s each): the run outlasts a test process that two busy cores leave waiting
+                         # for a second (3 poses were sometimes all written before the signal: exit 0)
                          stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=cli_env())
     try:
