@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
+import threading
 
 
 def _worker_init(init=None, initargs=()) -> None:
@@ -31,6 +32,25 @@ def _worker_init(init=None, initargs=()) -> None:
         pass
     if init is not None:
         init(*initargs)
+
+
+def _pool(ctx, processes: int, **kw):
+    """ctx.Pool(processes, **kw), its processes started with Ctrl-C ignored
+
+    A terminal's Ctrl-C goes to the whole process group. A worker (or the
+    forkserver, on first use) that gets it while it starts, before
+    _worker_init, ended in a KeyboardInterrupt traceback. An ignored SIGINT
+    is inherited across fork and exec, and Python keeps it ignored at start-up,
+    so the processes started here never see one; this process gets its own
+    handler back once the pool is made (the parent stops the workers itself).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return ctx.Pool(processes, **kw)
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        return ctx.Pool(processes, **kw)
+    finally:
+        signal.signal(signal.SIGINT, old)
 
 
 def _star(fa):
@@ -48,5 +68,5 @@ def process_map(fn, args: list[tuple], jobs: int, initializer=None, initargs=())
             yield fn(*a)
         return
     ctx = multiprocessing.get_context("forkserver")  # no fork of a threaded parent (OpenCV, BLAS): it can deadlock
-    with ctx.Pool(min(jobs, len(args)), initializer=_worker_init, initargs=(initializer, initargs)) as pool:  # __exit__ terminates
+    with _pool(ctx, min(jobs, len(args)), initializer=_worker_init, initargs=(initializer, initargs)) as pool:  # __exit__ terminates
         yield from pool.imap_unordered(_star, [(fn, a) for a in args])
