@@ -31,7 +31,7 @@ from rotstar_mrcal.atomic import allocated_npy, atomic_path, atomic_write
 from rotstar_mrcal.detect.display_offsets import DisplayCheck, dataset_offsets
 from rotstar_mrcal.vnl import mrcal_keeps, mrcal_min_corners
 from rotstar_mrcal.capture import coverage
-from rotstar_mrcal.capture.motion import difference_signal, downsample, is_still, noise_floor, screen_pixels
+from rotstar_mrcal.capture.motion import difference_signal, downsample, noise_floor, screen_pixels, still_fraction
 from rotstar_mrcal.capture.pose import quick_check, value_scale, write_segmented
 from rotstar_mrcal.capture.content import agreeing_fraction
 from rotstar_mrcal.capture.segment import Options, SegmentError, segment, threshold
@@ -105,43 +105,31 @@ def wait_for_new_view(src: FrameSource, tau: float, fps: float, still_s: float, 
     content does (content.agreeing_fraction): still when 30 % agree, moving
     below 10 %.
     """
-    if by_content:
-        return _wait_by_content(src, fps, still_s, need_motion, step)
     n = max(10, int(round(still_s * (fps or 25))))
     window = collections.deque(maxlen=n + 1)
+    moving_below, still_at = (0.1, 0.3) if by_content else (0.3, 0.75)
     moved = not need_motion
     while True:
         f = src.read()
         if f is None:
             return False
-        window.append(downsample(f.image, step))
+        small = downsample(f.image, step)
+        window.append(small.ravel() / np.float32(src.full_scale) if by_content else small)
         if len(window) < window.maxlen:
             continue
-        d, _ = difference_signal(list(window), src.full_scale, step=1)
-        if not moved and not is_still(d, tau, 0.3):
+        agree = _agreeing(window, f.image, src.full_scale, step) if by_content else \
+            still_fraction(difference_signal(list(window), src.full_scale, step=1)[0], tau)
+        if not moved and agree < moving_below:
             moved = True
-        elif moved and is_still(d, tau, 0.75):
+        elif moved and agree >= still_at:
             return True
 
 
-def _wait_by_content(src: FrameSource, fps: float, still_s: float, need_motion: bool, step: int) -> bool:
-    n = max(10, int(round(still_s * (fps or 25))))
-    window = collections.deque(maxlen=n + 1)
-    moved = not need_motion
-    while True:
-        f = src.read()
-        if f is None:
-            return False
-        window.append(downsample(f.image, step).ravel() / np.float32(src.full_scale))
-        if len(window) < window.maxlen:
-            continue
-        # the noise of two block means' difference, from within the frame (motion.noise_floor's mean |difference|)
-        sigma = noise_floor(f.image, src.full_scale, step) / 1.128 * np.sqrt(2)
-        agree = agreeing_fraction(np.stack(window), sigma)
-        if not moved and agree < 0.1:
-            moved = True
-        elif moved and agree >= 0.3:
-            return True
+def _agreeing(window, image: np.ndarray, full_scale: float, step: int) -> float:
+    """The fraction of the window's consecutive frames that agree, as the split by content compares them"""
+    # the noise of two block means' difference, from within the frame (motion.noise_floor's mean |difference|)
+    sigma = noise_floor(image, full_scale, step) / 1.128 * np.sqrt(2)
+    return agreeing_fraction(np.stack(window), sigma)
 
 
 def board_state(corners: np.ndarray) -> str:
