@@ -159,16 +159,24 @@ def test_replayed_flawed_recording(tmp_path):
     assert len(seg.images) == N - 1 and seg.method in ("content", "loop")
 
 
-@pytest.mark.slow
-def test_short_holds_with_flaws_through_the_commands(tmp_path, run_cli):
-    """rotstar-simulate --recording --hold short --timing-flaws, two loops of the first pose (what a camera records
-    from anywhere in the loop; one loop is not always enough, test_flawed_recordings_200), rotstar-segment --hold short, rotstar-detect: every corner"""
+def flawed_recording(tmp_path, run_cli, loops: int, poses: int, seed: int):
+    """tmp_path/rec.npy: rotstar-simulate's recording of the looping player (short holds, every timing flaw) showing
+    LAYOUT (written to tmp_path/pattern/)"""
     (tmp_path / "pattern").mkdir()
     (tmp_path / "pattern" / "pattern.json").write_text(LAYOUT.to_json())
     rec = tmp_path / "rec.npy"
     r = run_cli("rotstar-simulate", "--recording", rec, "--pattern", tmp_path / "pattern", "--camera", "pinhole-small",
-                "--hold", "short", "--timing-flaws", "--loops", 1, "--supersample", 2, "--poses", 1, "--seed", 4)
+                "--hold", "short", "--timing-flaws", "--loops", loops, "--supersample", 2, "--poses", poses,
+                "--seed", seed)
     assert r.returncode == 0, r.stderr
+    return rec
+
+
+@pytest.mark.slow
+def test_short_holds_with_flaws_through_the_commands(tmp_path, run_cli):
+    """rotstar-simulate --recording --hold short --timing-flaws, two loops of the first pose (what a camera records
+    from anywhere in the loop; one loop is not always enough, test_flawed_recordings_200), rotstar-segment --hold short, rotstar-detect: every corner"""
+    rec = flawed_recording(tmp_path, run_cli, loops=1, poses=1, seed=4)
     meta = json.loads(rec.with_suffix(".json").read_text())
     first = tmp_path / "first.npy"
     n = int((2 * HOLDS.sum() + 2 * HOLDS.max()) / 60 * FPS)  # two loops and two entries (5.1 s)
@@ -188,12 +196,7 @@ def test_capture_records_until_enough(tmp_path, run_cli, capsys, monkeypatch):
     two clean camera frames, well before the --loops limit, says the seconds, and the pose has the whole board"""
     from rotstar_mrcal.cli.capture import main as rotstar_capture
 
-    (tmp_path / "pattern").mkdir()
-    (tmp_path / "pattern" / "pattern.json").write_text(LAYOUT.to_json())
-    rec = tmp_path / "rec.npy"
-    r = run_cli("rotstar-simulate", "--recording", rec, "--pattern", tmp_path / "pattern", "--camera", "pinhole-small",
-                "--hold", "short", "--timing-flaws", "--loops", 2, "--supersample", 2, "--poses", 1, "--seed", 5)
-    assert r.returncode == 0, r.stderr
+    rec = flawed_recording(tmp_path, run_cli, loops=2, poses=1, seed=5)
     monkeypatch.setattr(sys, "stdin", io.StringIO("\n"))
     code = rotstar_capture(["--backend", "replay", "--device", str(rec), "--pattern", str(tmp_path / "pattern"),
                             "--hold", "short", "--loops", "2", "--until-enough", "--poses", "1",
@@ -213,12 +216,7 @@ def test_auto_with_short_holds(tmp_path, run_cli, capsys):
     plain difference test wants most consecutive frames equal, which short holds never give)"""
     from rotstar_mrcal.cli.capture import main as rotstar_capture
 
-    (tmp_path / "pattern").mkdir()
-    (tmp_path / "pattern" / "pattern.json").write_text(LAYOUT.to_json())
-    rec = tmp_path / "rec.npy"
-    r = run_cli("rotstar-simulate", "--recording", rec, "--pattern", tmp_path / "pattern", "--camera", "pinhole-small",
-                "--hold", "short", "--timing-flaws", "--loops", 1, "--supersample", 2, "--poses", 2, "--seed", 6)
-    assert r.returncode == 0, r.stderr
+    rec = flawed_recording(tmp_path, run_cli, loops=1, poses=2, seed=6)
     code = rotstar_capture(["--backend", "replay", "--device", str(rec), "--pattern", str(tmp_path / "pattern"),
                             "--hold", "short", "--loops", "2", "--until-enough", "--auto", "--poses", "2",
                             "--out", str(tmp_path / "seq")])
