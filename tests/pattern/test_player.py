@@ -333,6 +333,21 @@ def test_warning_fractional_dpr_and_wrong_size(ipad, browsers):
     assert any("pinch-zoomed (scale 2.00)" in p for p in st["problems"]), st["problems"]
 
 
+def played_runs(b, refreshes: int) -> list[list[int]]:
+    """[entry, refreshes shown] of each run of equal positions of the playing player, over this many animation frames"""
+    seq = b.evaluate(f"""new Promise(done => {{
+        const out = []; const f = () => {{ out.push(rotstar.status().pos);
+          if (out.length < {refreshes}) requestAnimationFrame(f); else done(out); }};
+        requestAnimationFrame(f); }})""")
+    runs = []
+    for p in seq:
+        if runs and runs[-1][0] == p:
+            runs[-1][1] += 1
+        else:
+            runs.append([p, 1])
+    return runs
+
+
 @needs_chromium
 def test_playback_holds_and_keys(tmp_path, browsers):
     """Playing, each entry is shown for exactly `hold` refreshes, in loop order; keys step and pause"""
@@ -348,16 +363,7 @@ def test_playback_holds_and_keys(tmp_path, browsers):
     st = b.load((tmp_path / "p.html").as_uri() + "#play")
     assert st["mode"] == "play" and st["hold"] == 3 and st["markerHold"] == 5
     n = st["entries"]
-    seq = b.evaluate(f"""new Promise(done => {{
-        const out = []; const f = () => {{ out.push(rotstar.status().pos);
-          if (out.length < {3 * (n * 3 + 2)}) requestAnimationFrame(f); else done(out); }};
-        requestAnimationFrame(f); }})""")
-    runs = []  # (entry, length) of consecutive equal positions
-    for p in seq:
-        if runs and runs[-1][0] == p:
-            runs[-1][1] += 1
-        else:
-            runs.append([p, 1])
+    runs = played_runs(b, 3 * (n * 3 + 2))
     inner = runs[1:-1]
     assert len(inner) >= n + 2
     for (a, _), (c, _) in zip(inner, inner[1:]):
@@ -433,16 +439,7 @@ def test_playback_holds_per_kind(tmp_path, browsers):
         st = b.load((tmp_path / f"p{k}.html").as_uri() + url)
         assert st["holds"] == want.tolist(), (url, st["holds"])
         n = st["entries"]
-        seq = b.evaluate(f"""new Promise(done => {{
-            const out = []; const f = () => {{ out.push(rotstar.status().pos);
-              if (out.length < {2 * int(want.sum()) + 20}) requestAnimationFrame(f); else done(out); }};
-            requestAnimationFrame(f); }})""")
-        runs = []
-        for p in seq:
-            if runs and runs[-1][0] == p:
-                runs[-1][1] += 1
-            else:
-                runs.append([p, 1])
+        runs = played_runs(b, 2 * int(want.sum()) + 20)
         inner = runs[1:-1]
         assert len(inner) >= n
         assert all(length == want[p] for p, length in inner), (url, runs)
