@@ -23,6 +23,7 @@ import dataclasses
 import fcntl
 import math
 import os
+import signal
 import subprocess
 import sys
 import zlib
@@ -96,6 +97,15 @@ def cli_env() -> dict:
     env = dict(os.environ)
     env["PATH"] = VENV_BIN + os.pathsep + env.get("PATH", "")
     return env
+
+
+def ctrl_c_reaches_it() -> None:
+    """In the child, before exec: Ctrl-C's default action, as a terminal's foreground job has it
+
+    A test run started in the background of a non-interactive shell (`make test &`, a CI step) inherits
+    SIGINT ignored, and so would the command under test: it would run to the end, unmoved by Ctrl-C.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 @pytest.fixture(scope="session")

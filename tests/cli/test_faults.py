@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 import pytest
 
-from conftest import VENV_BIN, cli_env
+from conftest import VENV_BIN, cli_env, ctrl_c_reaches_it
 from rotstar_mrcal import dataset
 from rotstar_mrcal.cli import common
 from rotstar_mrcal.pattern.layout import make_layout
@@ -472,15 +472,6 @@ def many_poses(seq, tmp_path_factory) -> str:
     for k in range(24):
         shutil.copytree(os.path.join(seq, f"pose00{k % 2}"), os.path.join(s, f"pose{k:03d}"))
     return s
-
-
-def ctrl_c_reaches_it() -> None:
-    """In the child, before exec: Ctrl-C's default action, as a terminal's foreground job has it
-
-    A test run started in the background of a non-interactive shell (`make test &`, a CI step) inherits
-    SIGINT ignored, and so would the command under test: it would run to the end, unmoved by Ctrl-C.
-    """
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def start_detect(many_poses, tmp_path, *extra):
