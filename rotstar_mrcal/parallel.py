@@ -18,11 +18,13 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
+from multiprocessing import resource_tracker
 import threading
 
 
 def _worker_init(init=None, initargs=()) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by _pool; ignored here, as it was
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     try:
         import cv2
@@ -35,22 +37,36 @@ def _worker_init(init=None, initargs=()) -> None:
 
 
 def _pool(ctx, processes: int, **kw):
-    """ctx.Pool(processes, **kw), its processes started with Ctrl-C ignored
+    """ctx.Pool(processes, **kw), its processes started with Ctrl-C blocked
 
     A terminal's Ctrl-C goes to the whole process group. A worker (or the
-    forkserver, on first use) that gets it while it starts, before
-    _worker_init, ended in a KeyboardInterrupt traceback. An ignored SIGINT
-    is inherited across fork and exec, and Python keeps it ignored at start-up,
-    so the processes started here never see one; this process gets its own
-    handler back once the pool is made (the parent stops the workers itself).
+    forkserver, on first use) that got it while it started, before
+    _worker_init, ended in a KeyboardInterrupt traceback. A blocked signal
+    stays blocked across fork and exec, so the processes started here never
+    see one (_worker_init ignores it, then unblocks it).
+
+    In this process a Ctrl-C while the pool starts (the forkserver's first
+    start takes a second) is noted, not raised: raised half-way, it left
+    workers starting with no pool to stop them. It is raised once the pool is
+    whole, and the pool terminated. (Ignoring SIGINT here instead loses it.)
     """
     if threading.current_thread() is not threading.main_thread():
         return ctx.Pool(processes, **kw)
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    resource_tracker.ensure_running()  # first: its own start unblocks SIGINT when done
+    noted = []
+    old = signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
+    if old == signal.SIG_IGN:  # started ignoring Ctrl-C (`cmd &`): so be it
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # (a thread's mask, inherited by fork)
     try:
-        return ctx.Pool(processes, **kw)
+        pool = ctx.Pool(processes, **kw)
     finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         signal.signal(signal.SIGINT, old)
+    if noted:
+        pool.terminate()
+        signal.raise_signal(signal.SIGINT)  # as if it came now: the caller's own handler
+    return pool
 
 
 def _star(fa):

@@ -474,15 +474,17 @@ def many_poses(seq, tmp_path_factory) -> str:
     return s
 
 
-def start_detect(many_poses, tmp_path, *extra):
+def start_detect(many_poses, tmp_path, *extra, children_first=2):
+    """rotstar-detect started on many_poses, once it has children_first child processes"""
     p = subprocess.Popen([os.path.join(VENV_BIN, "rotstar-detect"), many_poses, "--jobs", "2", *extra],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=cli_env(),
                          start_new_session=True, preexec_fn=ctrl_c_reaches_it)
     t0 = time.monotonic()
-    while len(children(p.pid)) < 2:  # the two workers
+    while len(children(p.pid)) < children_first:  # the resource tracker and the forkserver
         assert p.poll() is None and time.monotonic() - t0 < 30, p.communicate()
         time.sleep(0.02)
-    time.sleep(0.3)  # the workers are busy with poses
+    if children_first >= 2:
+        time.sleep(0.3)  # the workers are busy with poses
     return p, children(p.pid)
 
 
@@ -499,8 +501,10 @@ def test_sigterm_leaves_no_worker_running(many_poses, tmp_path):
     assert os.listdir(tmp_path) == []  # no corners.vnl, no temporary file
 
 
-def test_ctrl_c_prints_one_line_and_exits_130(many_poses, tmp_path):
-    p, workers = start_detect(many_poses, tmp_path, "-o", "c.vnl")
+@pytest.mark.parametrize("children_first", [2, 1], ids=["while-working", "while-the-pool-starts"])
+def test_ctrl_c_prints_one_line_and_exits_130(many_poses, tmp_path, children_first):
+    """Ctrl-C at work, or while the pool starts (CI once lost that one: the run went on to exit 0)"""
+    p, workers = start_detect(many_poses, tmp_path, "-o", "c.vnl", children_first=children_first)
     os.killpg(p.pid, signal.SIGINT)  # as a terminal does: the whole process group
     out, err = p.communicate(timeout=30)
     assert p.returncode == 130 and "Traceback" not in err and "KeyboardInterrupt" not in err, err
