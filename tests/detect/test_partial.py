@@ -19,6 +19,8 @@ from rotstar_mrcal.simulate import Settings, look_at_pose, preset_model
 from rotstar_mrcal.simulate.dataset import render_pose, true_corners
 from rotstar_mrcal.simulate.screen import exact_frames, make_screen
 
+from conftest import TEST_SUPERSAMPLE
+
 deg = math.radians
 HANGING = {  # target pixel of the board centre, distance m, tilt, tilt axis, roll
     "top-left corner": ((80, 60), 0.25, deg(30), deg(10), 0.6),
@@ -43,7 +45,7 @@ def hanging():
     out = {}
     for k, (name, (xy, d, t, ta, r)) in enumerate(HANGING.items()):
         rt = look_at_pose(model, layout, xy, d, tilt=t, tilt_axis=ta, roll=r)
-        imgs = render_pose(screen, model, rt, Settings(seed=k), np.random.default_rng(k)).astype(np.float32)
+        imgs = render_pose(screen, model, rt, Settings(seed=k, supersample=TEST_SUPERSAMPLE), np.random.default_rng(k)).astype(np.float32)
         out[name] = (imgs[:8], imgs[8:21], true_corners(model, layout, rt))
     return layout, out
 

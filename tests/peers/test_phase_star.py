@@ -19,6 +19,8 @@ from rotstar_mrcal.peers.registry import METHODS, PoseImages
 from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.vnl import read_corners
 
+from conftest import TEST_SUPERSAMPLE
+
 PAPER = make_layout(screen=(1000, 860), pitch=150, band=40, phase_period=150, star_segments=16)
 
 
@@ -31,7 +33,7 @@ def poses(model, layout):
 def paper_seq(tmp_path_factory):
     seq = str(tmp_path_factory.mktemp("paper") / "seq")
     model = simulate.preset_model("d435")
-    truth = simulate.write_dataset(seq, PAPER, model, poses(model, PAPER), simulate.Settings(seed=1))
+    truth = simulate.write_dataset(seq, PAPER, model, poses(model, PAPER), simulate.Settings(seed=1, supersample=TEST_SUPERSAMPLE))
     return seq, truth
 
 
