@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 
 import mrcal
 import pytest
@@ -124,9 +125,13 @@ def test_one_dataset_is_split_in_two(d435_seq, run_cli, tmp_path):
     assert res["label"] == "seq"  # the recording's name, not "seq vs seq"
 
 
-def test_heldout_without_outdir_writes_nothing_here(d435_seq, run_cli, tmp_path):
-    r = run_cli("rotstar-crossval", os.path.join(d435_seq.path, "truth.cameramodel"), d435_seq.path, "--jobs", "2",
-                cwd=tmp_path)
+def test_heldout_without_outdir_writes_nothing_here(d435_seq, run_cli, tmp_path, tmp_path_factory):
+    seq = tmp_path_factory.mktemp("two") / "seq"  # two poses of it: the same run, a sixth of the detection
+    os.makedirs(seq)
+    shutil.copy(os.path.join(d435_seq.path, "pattern.json"), seq)
+    for pose in d435_seq.poses[1:3]:
+        shutil.copytree(os.path.join(d435_seq.path, pose), seq / pose)
+    r = run_cli("rotstar-crossval", os.path.join(d435_seq.path, "truth.cameramodel"), seq, "--jobs", "2", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert os.listdir(tmp_path) == [] and "not kept" in r.stdout
 
