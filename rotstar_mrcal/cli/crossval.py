@@ -19,6 +19,7 @@ from rotstar_mrcal.evaluate.detection import detect_dataset as _detect_dataset
 from rotstar_mrcal.evaluate.detection import split_interleaved
 from rotstar_mrcal.evaluate.crossval import cross_validate
 from rotstar_mrcal.evaluate.groups import compare_sets, default_label
+from rotstar_mrcal.report import crossval as crossval_report
 from rotstar_mrcal.evaluate.heldout import heldout
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set, load_model
 from rotstar_mrcal.cli.detect import DETECT_METHODS
@@ -212,12 +213,13 @@ def mode_sets(a, sets: dict) -> int:
     c = compare_sets(sets, a.outdir, a.lensmodel, a.knots_x, a.pattern, a.imagersize, a.gridn, a.distance, a.jobs,
                      a.label, log=lambda s: say(s if s.startswith("[") else f"rotstar-crossval: {s}"),
                      progress=progress.step)
+    crossval_report.draw(c, a.outdir)
     _write_json(c.to_json(), os.path.join(a.outdir, "results.json"))
     say(f"rotstar-crossval: wrote {os.path.join(a.outdir, 'results.json')}")
     if a.json:
         _write_json(c.to_json())
     else:
-        print(c.markdown())
+        print(crossval_report.markdown(c))
     return 0 if c.failed < c.sets else 1  # a set that cannot be calibrated is a result too
 
 

@@ -5,16 +5,17 @@ SYNOPSIS
     from rotstar_mrcal.evaluate.groups import compare_sets
     c = compare_sets({"rotstar": ("xval/rotstar/A.vnl", "xval/rotstar/B.vnl")}, "xval", label="4000 us")
     c.to_json()                      # what rotstar-crossval writes as xval/results.json
-    print(c.markdown())              # the table it prints
     c.complete                       # every set calibrated
+    report.crossval.draw(c, "xval")  # its figures (rotstar-crossval draws them; evaluation does not)
 
 rotstar-crossval's comparison mode. For each named corner set (a detector's
 corners of the same two pose groups A and B): mrcal-calibrate-cameras on
 each group (the lean model by default, calibrate.resolve_lensmodel; the
 commands run in worker processes), then compare.evaluate on the two models
 (held-out error both ways, mrcal's cross-validation, and on simulated data
-each model against the truth), the heat maps (each map its own colour
-scale, from zero to its data's range: plots.heatmaps) and the per-pose plot.
+each model against the truth). What the heat maps and the per-pose plot
+show is kept with the result (Comparison.maps, not in its JSON), for
+report.crossval to draw.
 The condition's label defaults to default_label's: the recording's name
 when A and B are the two halves of one, else "A vs B". A set that cannot be read or
 calibrated is reported in the result, not raised.
@@ -26,20 +27,32 @@ import concurrent.futures as cf
 import dataclasses
 import os
 
-import matplotlib.pyplot as plt
 import mrcal
+import numpy as np
 
 from rotstar_mrcal.calibrate import solve as cal
 from rotstar_mrcal.calibrate.checks import SPLINED_MIN_BOARDS
 from rotstar_mrcal.evaluate import compare
-from rotstar_mrcal.report import plots
 from rotstar_mrcal.calibrate.solve import calibration_argv, focal_seed, resolve_lensmodel
 from rotstar_mrcal.peers.registry import description
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
-from rotstar_mrcal.report.page import detail
 from rotstar_mrcal.simulate.dataset import load_truth
 
 FORMAT = "rotstar-crossval/1"
+
+
+@dataclasses.dataclass
+class MapPanels:
+    """What one corner set's heat-map figure shows: panels of (title, (Ny, Nx) px) on the grid q, each with
+    the corners a calibration saw (or None); its file name is figures["maps"] of the set's entry"""
+
+    method: str
+    q: np.ndarray
+    panels: list
+    points: list
+    imagersize: tuple
+    title: str
+    figures: dict  # the set's "figures" entry in methods, filled in when it is drawn
 
 
 @dataclasses.dataclass
@@ -56,6 +69,7 @@ class Comparison:
     commands: list
     failed: int = 0
     sets: int = 0
+    maps: list = dataclasses.field(default_factory=list, repr=False)  # MapPanels per set, to draw
 
     @property
     def complete(self) -> bool:
@@ -74,8 +88,11 @@ class Comparison:
                    d.get("gridn", 0), d.get("methods", []), d.get("figures", {}), d.get("commands", []),
                    sum(1 for m in d.get("methods", []) if m.get("error")), len(d.get("methods", [])))
 
-    def markdown(self) -> str:
-        return detail(self.to_json()).markdown()
+    def per_pose(self) -> list:
+        """[(title, {method: {pose: held-out MRE}})] both ways, for the per-pose plot (empty entries: none)"""
+        return [(f"calibrated on {a}, tested on {b} ({self.label})",
+                 {m["method"]: m["heldout"][f"{a}->{b}"]["per_pose"] for m in self.methods if m.get("heldout")})
+                for a, b in (("A", "B"), ("B", "A"))]
 
 
 def default_label(a: str, b: str) -> str:
@@ -184,10 +201,9 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
             evals[n] = _evaluate(*args[n])
             step(f"evaluate {n}", "done")
 
-    # figures: each map its own colour scale from its data (plots.heatmaps), so that 0.01 px structure shows
     first_a, first_b = next(iter(loaded.values()))
     label = label or default_label(first_a.seq or first_a.vnl, first_b.seq or first_b.vnl)
-    methods_out = []
+    methods_out, maps = [], []
     for n in sets:
         if n in failed:
             methods_out.append({"method": n, "description": description(n), "error": "; ".join(failed[n]),
@@ -206,26 +222,13 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
                 points.append(cs.corners.reshape(-1, 2))
         figs = {}
         if panels:
-            fig = plots.heatmaps(e.crossval.q if e.crossval is not None else e.truth["A"].q, panels,
-                                 ca.imagersize, points=points, title=f"{n}: {label}")
-            figs["maps"] = f"{n}-maps.png"
-            fig.savefig(os.path.join(outdir, figs["maps"]), dpi=100)
-            plt.close(fig)
+            maps.append(MapPanels(n, e.crossval.q if e.crossval is not None else e.truth["A"].q, panels, points,
+                                  ca.imagersize, f"{n}: {label}", figs))
         methods_out.append({**e.summary, "description": description(n), "figures": figs,
                             "models": {s: os.path.relpath(model[n][s], outdir) for s in "AB"},
                             "corners": {"A": os.path.abspath(ca.vnl), "B": os.path.abspath(cb.vnl)}})
-    per_pose = [(f"calibrated on A, tested on B ({label})",
-                 {m["method"]: m["heldout"]["A->B"]["per_pose"] for m in methods_out if m.get("heldout")}),
-                (f"calibrated on B, tested on A ({label})",
-                 {m["method"]: m["heldout"]["B->A"]["per_pose"] for m in methods_out if m.get("heldout")})]
-    figures = {}
-    if any(p[1] for p in per_pose):
-        fig = plots.per_pose(per_pose)
-        figures["per_pose"] = "per-pose.png"
-        fig.savefig(os.path.join(outdir, figures["per_pose"]), dpi=100)
-        plt.close(fig)
     return Comparison(
         label=label,
         groups={"A": first_a.seq or first_a.vnl, "B": first_b.seq or first_b.vnl},
-        lensmodel=lensmodel, distance_m=distance, gridn=gridn, methods=methods_out, figures=figures,
-        commands=[cal.command_line(argv) for _, _, argv in cjobs], failed=len(failed), sets=len(sets))
+        lensmodel=lensmodel, distance_m=distance, gridn=gridn, methods=methods_out, figures={},
+        commands=[cal.command_line(argv) for _, _, argv in cjobs], failed=len(failed), sets=len(sets), maps=maps)
