@@ -87,7 +87,13 @@ class FrameShifts:
 
         jac: (N, 2, 2) camera pixels per display pixel at the corners; uv: (N, 2) their display points.
         """
-        return np.einsum("nab,knb->kna", jac, self.displacement(uv))
+        return image_displacement(jac, self.offsets, self.linear, self.centre, uv)
+
+
+def image_displacement(jac, offsets, linear, centre, uv) -> np.ndarray:
+    """(nframes, N, 2) camera px: map_displacement at display points uv (N, 2) through jac (N, 2, 2), camera px
+    per display px at each point"""
+    return np.einsum("nab,knb->kna", jac, map_displacement(offsets, linear, centre, uv))
 
 
 def map_displacement(offsets, linear, centre, uv) -> np.ndarray:

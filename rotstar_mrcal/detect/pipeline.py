@@ -71,7 +71,7 @@ import numpy as np
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.detect.consistency import refined_consistency
 from rotstar_mrcal.detect.display_offsets import (
-    MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian, map_displacement,
+    MAX_MOTION, FrameShifts, frame_shifts, grid_homography, homography_jacobian, image_displacement,
 )
 from rotstar_mrcal.detect.edgespread import BLUR_FIELDS, blur_columns
 from rotstar_mrcal.detect.elements import by_graph, by_identity
@@ -224,15 +224,20 @@ def refine_with_display_offsets(frames, res, rough, labels, w, pitch, centre=Non
     maps move a corner by SHIFT_MIN_PX or more.
     """
     idx, per = per_frame_corners(frames, res.corners, w, res.ok)
-    H = grid_homography(res.corners[res.ok], labels[res.ok], pitch)
     uv = labels * float(pitch)
-    jac = homography_jacobian(H, uv)
+    jac = label_jacobian(res.corners[res.ok], labels[res.ok], labels, pitch)
     shifts = frame_shifts(per, res.corners[idx], labels[idx], pitch, jac[idx], centre)
     img = shifts.image_shifts(jac, uv)
     if np.abs(img).max() > SHIFT_MIN_PX:
         res = symmetric_refine(frames, np.where(res.ok[:, None], res.corners, rough), w, shifts=img)
         shifts.applied = True
     return res, shifts
+
+
+def label_jacobian(corners: np.ndarray, labels: np.ndarray, at: np.ndarray, pitch: float) -> np.ndarray:
+    """(M, 2, 2) camera px per display px at the grid labels `at` (M, 2), from the homography of corners (N, 2)
+    at labels (N, 2); pitch: display px per grid step"""
+    return homography_jacobian(grid_homography(corners, labels, pitch), at * float(pitch))
 
 
 def image_shifts(shifts: FrameShifts | None, corners: np.ndarray, labels: np.ndarray, pitch: float):
@@ -242,8 +247,7 @@ def image_shifts(shifts: FrameShifts | None, corners: np.ndarray, labels: np.nda
     ok = np.isfinite(corners).all(axis=1)
     if ok.sum() < 4:
         return None
-    jac = homography_jacobian(grid_homography(corners[ok], labels[ok], pitch), labels * float(pitch))
-    img = shifts.image_shifts(jac, labels * float(pitch))
+    img = shifts.image_shifts(label_jacobian(corners[ok], labels[ok], labels, pitch), labels * float(pitch))
     return img if np.abs(img).max() > SHIFT_MIN_PX else None
 
 
@@ -265,9 +269,8 @@ def refine_with_maps(frames: np.ndarray, layout: Layout, r: PoseCorners, offsets
     x1, y1 = np.minimum(np.ceil(q.max(axis=0)).astype(int) + m + 1, (W, H))
     off = np.array([x0, y0], float)
     lowpass = prefilter(np.asarray(frames, np.float32)[:, y0:y1, x0:x1], r.prefilter_px)
-    uv = labels * float(layout.pitch)
-    jac = homography_jacobian(grid_homography(q, labels, layout.pitch), uv)
-    img = np.einsum("nab,knb->kna", jac, map_displacement(offsets, linear, centre, uv))
+    img = image_displacement(label_jacobian(q, labels, labels, layout.pitch), offsets, linear, centre,
+                             labels * float(layout.pitch))
     res = symmetric_refine(lowpass, q - off, w, shifts=img)
     corners, sigma, cov = r.corners.copy(), r.sigma.copy(), r.cov.copy()
     k = res.ok
