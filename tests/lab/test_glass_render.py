@@ -1,4 +1,4 @@
-"""The rendered glass rows (rotstar_lab.benchmark.glassrender): the truth's refracted grids and the same-noise reference"""
+"""The rendered glass rows (rotstar_lab.benchmark.glassrender): the refracted truth, the same-noise reference"""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from rotstar_lab.benchmark.glass import observed_corners
-from rotstar_lab.benchmark.glassrender import rendered_rig_row, same_noise_reference, true_grids
+from rotstar_lab.benchmark.glassrender import (rendered_failures, rendered_rig_row, rendered_rig_table, rendered_table,
+                                                same_noise_reference, true_grids)
 from rotstar_mrcal.evaluate.truth import truth_error
 from rotstar_mrcal.optics.refraction import Glass
 from rotstar_mrcal.pattern.layout import make_layout
@@ -65,3 +66,21 @@ def test_a_rendered_rig_row(tmp_path):
     assert row["corrected"]["camera0_median_px"] < row["plain"]["camera0_median_px"] / 2
     assert row["corrected"]["camera0_median_px"] < 1.5 * row["reference"]["camera0_median_px"]
     assert 0 < row["noise_px"] < 0.05
+
+
+def test_the_rendered_tables_and_their_verdict():
+    one = {"poses": 20, "glass_mm": 1.0, "noise_px": 0.0035, "plain": (0.1, 0.24), "corrected": (0.023, 0.06),
+           "reference": (0.021, 0.044), "estimate_mm": 1.065, "sigma_mm": 0.053, "applied": True, "reason": "x"}
+    pair = {"baseline_error_mm": 0.026, "direction_error_deg": 0.05, "rotation_error_deg": 0.003,
+            "camera0_median_px": 0.12}
+    rig = {**one, "plain": pair, "corrected": dict(pair, camera0_median_px=0.018),
+           "reference": dict(pair, camera0_median_px=0.0178)}
+    assert rendered_failures([one], [rig]) == []
+    assert "| 20 | 1 mm |" in rendered_table([one]) and "1.10x" in rendered_table([one])
+    assert "+0.0260 -> +0.0260 (+0.0260) mm" in rendered_rig_table([rig])
+    worse = dict(one, corrected=(0.03, 0.06))
+    assert any("> 1.2x its same-noise reference" in b for b in rendered_failures([worse], []))
+    assert rendered_failures([dict(one, estimate_mm=1.3)], [])  # 0.3 mm off, 4 sigma
+    assert rendered_failures([], [dict(rig, applied=False)])
+    assert rendered_failures([dict(one, glass_mm=0.0, estimate_mm=0.3)], [])  # a glass-free capture corrected
+    assert not rendered_failures([dict(one, glass_mm=0.0, estimate_mm=0.1, applied=False)], [])
