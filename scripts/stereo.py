@@ -64,6 +64,7 @@ import mrcal  # noqa: E402
 import numpy as np  # noqa: E402
 
 from rotstar_lab.benchmark.glass import observed_corners  # noqa: E402
+from rotstar_lab.benchmark.glassrender import same_noise_reference, true_grids  # noqa: E402
 from rotstar_lab.docblock import rewrite_block  # noqa: E402
 from rotstar_lab.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
 from rotstar_mrcal.calibrate.rig import camera_of  # noqa: E402
@@ -173,17 +174,28 @@ def corner_rms(vnls, truth, glass_mm: float = 0.0) -> float:
     return float(np.sqrt(np.nanmean(d**2)))
 
 
-def glass_effect(files: list, truth) -> dict:
-    """What rotstar-calibrate found about the glass in one calibration (its calibration.json), and the plain
-    joint solve before the correction (candidates/rig/) against the truth, as evaluate.stereo.evaluate's truth"""
+def vs_truth(models, truth) -> dict:
+    """A pair's cameras and camera 1's pose against the truth, as evaluate.stereo.evaluate's truth"""
+    return {"cameras": [stereo.camera_truth_error(m, tm, truth.rt_ref_board).summary()
+                        for m, tm in zip(models, truth.models)],
+            "extrinsics": stereo.extrinsics_error(models[:2], tuple(truth.models[:2])).summary()}
+
+
+def glass_effect(files: list, truth, glass_mm: float) -> dict:
+    """What rotstar-calibrate found about the glass in one calibration (its calibration.json); the plain joint
+    solve before the correction (candidates/rig/) and its same-noise reference (the glass-free solve with the
+    calibration's own corner errors, rotstar_lab.benchmark.glassrender) against the truth"""
     cdir = os.path.dirname(files[0])
     with open(os.path.join(cdir, "calibration.json")) as f:
         g = json.load(f).get("glass") or {}
     plain = [mrcal.cameramodel(os.path.join(cdir, "candidates", "rig", os.path.basename(fn))) for fn in files[:2]]
+    oi = plain[0].optimization_inputs()
+    rts = {(p, k): mrcal.compose_rt(m.extrinsics_rt_fromref(), rt)
+           for p, rt in truth.rt_ref_board.items() for k, m in enumerate(truth.models)}
+    ref, _ = same_noise_reference(oi, *true_grids(truth.models, truth.layout, rts, Glass.mm(glass_mm), oi))
+    reference = [mrcal.cameramodel(optimization_inputs=ref, icam_intrinsics=k) for k in range(len(plain))]
     return {**{k: g.get(k) for k in ("thickness_mm", "sigma_mm", "applied", "reason")},
-            "plain": {"cameras": [stereo.camera_truth_error(m, tm, truth.rt_ref_board).summary()
-                                  for m, tm in zip(plain, truth.models)],
-                      "extrinsics": stereo.extrinsics_error(plain, tuple(truth.models[:2])).summary()}}
+            "plain": vs_truth(plain, truth), "reference": vs_truth(reference, truth)}
 
 
 def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
@@ -200,7 +212,7 @@ def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
         r = stereo.evaluate(m, {g: tuple(v[:2]) for g, v in models.items()}, true, truth.rt_ref_board, pts,
                             noise_px=noise, seed=a.seed)
         r["corner_rms_px"] = noise
-        r["glass"] = {g: glass_effect(files, truth) for g, files in groups.items()}
+        r["glass"] = {g: glass_effect(files, truth, a.glass) for g, files in groups.items()}
         for g, v in models.items():  # the colour camera (--rgb): against its truth too
             for k in range(2, len(v)):
                 r["truth"][g]["cameras"].append(
