@@ -2,7 +2,7 @@
 """rotstar-calibrate on simulated D435 captures: its default model, and a screen's cover glass taken out
 
     python scripts/calib_bench.py [--parts models glass] [--poses 12 20 40] [--seed 0] [--work calib-bench]
-                                  [--jobs 2] [--glass-poses 20 40] [--render-poses 20] [--rig-render-poses 16] [--doc]
+                                  [--jobs 2] [--glass-poses 20 40] [--render-poses 20] [--rig-render-poses 20] [--doc]
 
 models: rotstar-calibrate's default model against rotstar-detect's printed
 command (rotstar_lab.modelcheck). glass (issue 22): plain mrcal against
@@ -10,9 +10,9 @@ rotstar-calibrate's correction through 0 / 0.5 / 1.0 / 1.5 mm of cover glass,
 against the true camera: exact corners plus noise for --glass-poses and the
 D435's infrared pair (rotstar_lab.benchmark.glass, as make glass-bench), then
 rendered captures through 1 mm (--render-poses, one D435) and 0 and 1 mm
-(--rig-render-poses, the infrared pair) through rotstar-simulate and
-rotstar-calibrate, each against its same-noise reference
-(rotstar_lab.benchmark.glassrender). Prints the tables; with --doc also
+(--rig-render-poses, the infrared pair; 20 poses each by default, issue
+22's minimum) through rotstar-simulate and rotstar-calibrate, each against
+its same-noise reference (rotstar_lab.benchmark.glassrender). Prints the tables; with --doc also
 writes them into doc/validation.md between its calib-bench and
 calib-bench-glass markers. Exit 1 if a default run is neither within 2x the
 better model nor refused with a reason, or a glass row misses issue 22's
@@ -99,7 +99,7 @@ def main():
     p.add_argument("--glass-poses", type=int, nargs="+", default=[20, 40],
                    help="poses of the exact-corner glass rows (the first: the stereo pair's too)")
     p.add_argument("--render-poses", type=int, default=20, help="poses of the rendered glass row (0: none)")
-    p.add_argument("--rig-render-poses", type=int, default=16, help="poses of the rendered stereo rows (0: none)")
+    p.add_argument("--rig-render-poses", type=int, default=20, help="poses of the rendered stereo rows (0: none)")
     p.add_argument("--doc", action="store_true", help="rewrite the tables in doc/validation.md")
     a = p.parse_args()
     os.makedirs(a.work, exist_ok=True)
