@@ -2,7 +2,8 @@
 """rotstar-calibrate on simulated D435 captures: its default model, and a screen's cover glass taken out
 
     python scripts/calib_bench.py [--parts models glass] [--poses 12 20 40] [--seed 0] [--work calib-bench]
-                                  [--jobs 2] [--glass-poses 20 40] [--render-poses 20] [--rig-render-poses 20] [--doc]
+                                  [--jobs 2] [--glass-poses 20 40] [--render-poses 20] [--rig-render-poses 20]
+                                  [--rig-render d435] [--doc]
 
 models: rotstar-calibrate's default model against rotstar-detect's printed
 command (rotstar_lab.modelcheck). glass (issue 22): plain mrcal against
@@ -77,7 +78,7 @@ def glass_part(a, log) -> tuple[str, bool]:
     rows = glass.run(work, a.glass_poses, GLASS_MM, a.seed, log=log)
     rig = [glass.rig_row(a.glass_poses[0], t, a.seed) for t in GLASS_MM]
     rendered = [glassrender.rendered_row(work, a.render_poses, 1.0, a.seed, a.jobs, log)] if a.render_poses else []
-    rendered_rig = [glassrender.rendered_rig_row(work, a.rig_render_poses, t, a.seed, a.jobs, log)
+    rendered_rig = [glassrender.rendered_rig_row(work, a.rig_render_poses, t, a.seed, a.jobs, log, a.rig_render)
                     for t in (0.0, 1.0)] if a.rig_render_poses else []
     with open(os.path.join(work, "results.json"), "w") as f:
         json.dump({"exact": rows, "exact stereo pair": rig, "rendered": rendered,
@@ -100,6 +101,8 @@ def main():
                    help="poses of the exact-corner glass rows (the first: the stereo pair's too)")
     p.add_argument("--render-poses", type=int, default=20, help="poses of the rendered glass row (0: none)")
     p.add_argument("--rig-render-poses", type=int, default=20, help="poses of the rendered stereo rows (0: none)")
+    p.add_argument("--rig-render", choices=("d435", "d435-small"), default="d435",
+                   help="the rendered stereo rows' rig (rotstar-simulate --rig; d435-small: half the resolution)")
     p.add_argument("--doc", action="store_true", help="rewrite the tables in doc/validation.md")
     a = p.parse_args()
     os.makedirs(a.work, exist_ok=True)

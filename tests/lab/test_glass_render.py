@@ -61,7 +61,7 @@ def test_the_reference_is_the_glass_free_solve_with_the_same_corner_errors():
 @pytest.mark.slow
 def test_a_rendered_rig_row(tmp_path):
     """(1-2 min) rotstar-simulate --rig d435-small --glass 1.0 and rotstar-calibrate: the glass found and taken out"""
-    row = rendered_rig_row(str(tmp_path), 8, 1.0, seed=2, jobs=2, log=lambda s: None)
+    row = rendered_rig_row(str(tmp_path), 8, 1.0, seed=2, jobs=2, log=lambda s: None, rig="d435-small")
     assert row["applied"] and abs(row["estimate_mm"] - 1.0) < max(0.15, 3 * row["sigma_mm"])
     assert row["corrected"]["camera0_median_px"] < row["plain"]["camera0_median_px"] / 2
     assert row["corrected"]["camera0_median_px"] < 1.5 * row["reference"]["camera0_median_px"]

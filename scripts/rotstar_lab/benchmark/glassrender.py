@@ -5,7 +5,7 @@ SYNOPSIS
     from rotstar_lab.benchmark.glassrender import rendered_row, rendered_rig_row
     row = rendered_row("work", 20, 1.0, seed=4, jobs=1)      # one D435, rendered through 1 mm of glass
     row["plain"], row["corrected"], row["reference"]        # (median, worst) px against the true camera
-    rig = rendered_rig_row("work", 16, 1.0, seed=4, jobs=1)  # the D435's infrared pair (d435-small)
+    rig = rendered_rig_row("work", 20, 1.0, seed=4, jobs=1)  # the D435's infrared pair (--rig d435)
     rig["plain"]["baseline_error_mm"], rig["corrected"]["rotation_error_deg"]
 
 Everything runs as the user runs it: rotstar-simulate --glass renders the
@@ -148,12 +148,13 @@ def rig_vs_truth(models, truth) -> dict:
             "camera0_median_px": camera_truth_error(models[0], truth.models[0], truth.rt_ref_board).median}
 
 
-def rendered_rig_row(work: str, n: int, glass_mm: float, seed: int = 0, jobs: int = 1, log=print) -> dict:
-    """The D435's infrared pair (--rig d435-small) rendered through glass_mm, rotstar-calibrate's defaults"""
-    seq = os.path.join(work, f"render-rig-n{n}-glass{glass_mm:g}-seed{seed}")
+def rendered_rig_row(work: str, n: int, glass_mm: float, seed: int = 0, jobs: int = 1, log=print,
+                     rig: str = "d435") -> dict:
+    """The D435's infrared pair (rotstar-simulate --rig RIG) rendered through glass_mm, rotstar-calibrate's defaults"""
+    seq = os.path.join(work, f"render-{rig}-n{n}-glass{glass_mm:g}-seed{seed}")
     cal = seq + "-cal"
     if not os.path.exists(os.path.join(seq, "truth.json")):
-        run(["rotstar-simulate", "--rig", "d435-small", "--out", seq, "--poses", n, "--seed", seed,
+        run(["rotstar-simulate", "--rig", rig, "--out", seq, "--poses", n, "--seed", seed,
              "--glass", glass_mm, "--jobs", jobs, "--force"], log)
     run(["rotstar-calibrate", seq, "--outdir", cal, "--jobs", jobs], log)
     truth = load_rig_truth(seq)
@@ -166,7 +167,7 @@ def rendered_rig_row(work: str, n: int, glass_mm: float, seed: int = 0, jobs: in
                                 Glass.mm(glass_mm, truth.settings.get("glass_index", 1.5)), oi)
     ref, noise = same_noise_reference(oi, refr, straight)
     reference = [mrcal.cameramodel(optimization_inputs=ref, icam_intrinsics=k) for k in (0, 1)]
-    return {"poses": n, "glass_mm": glass_mm, "rendered": True, "noise_px": noise,
+    return {"poses": n, "glass_mm": glass_mm, "rendered": True, "noise_px": noise, "rig": rig,
             "plain": rig_vs_truth(plain, truth), "corrected": rig_vs_truth(corrected, truth),
             "reference": rig_vs_truth(reference, truth), **_estimate(glass_of(os.path.join(cal, "calibration.json")))}
 
@@ -234,7 +235,8 @@ def rendered_report(rows: list[dict], rig: list[dict], seed: int, bad: list[str]
                  f"seed {seed}); the reference is the glass-free solve with the capture's own corner errors "
                  "(rotstar_lab.benchmark.glassrender):\n\n" + rendered_table(rows))
     if rig:
-        text += ("\n\nThe D435's infrared pair rendered (`rotstar-simulate --rig d435-small --glass`, then "
+        preset = rig[0].get("rig", "d435")
+        text += (f"\n\nThe D435's infrared pair rendered (`rotstar-simulate --rig {preset} --glass`, then "
                  "`rotstar-calibrate` with its defaults), camera 1 against the truth, plain -> corrected "
                  "(same-noise reference):\n\n" + rendered_rig_table(rig))
     return text + ("\n\n*Not met: " + "; ".join(bad) + "*" if bad else "")
