@@ -41,7 +41,7 @@ help:
 	@echo "make test-slow - the long end-to-end tests that make test leaves out"
 	@echo "make stereo - simulated D435 stereo pair: joint calibrations vs the truth, cross-validation, depth error at 0.5/1/2 m"
 	@echo "make bench  - accuracy and speed against OpenCV and mrgingham, partial views against ChArUco, each method's failure modes, then calib-bench and coverage-bench"
-	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses)"
+	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses); a cover glass (0-1.5 mm) plain vs corrected, exact and rendered, one camera and the stereo pair"
 	@echo "make coverage-bench - mrcal's uncertainty with and without boards hanging over the imager's edges"
 	@echo "make glass-bench - a screen's cover glass (0-1.5 mm): plain calibration vs rotstar-calibrate's correction (20/40 poses)"
 	@echo "make blur-map-doc - doc/img/blur-map.png: rotstar-detect --blur-map on a simulated D435 with strong coma"
@@ -99,7 +99,7 @@ bench: setup
 	$(MAKE) calib-bench
 	$(MAKE) coverage-bench
 
-# writes its table into doc/validation.md (between the calib-bench markers)
+# writes its tables into doc/validation.md (between the calib-bench and calib-bench-glass markers)
 calib-bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/calib_bench.py --work calib-bench-out --doc
 

@@ -15,7 +15,8 @@ The chain, each command printed (stderr) before it runs:
    the image corners; the right imager's x0.9), camera 1
    50 mm to the right of camera 0, a lens and a small rotation of its own;
    --rgb: the colour camera as camera 2), --poses board poses with the
-   truth (truth-camera-K.cameramodel, truth.json);
+   truth (truth-camera-K.cameramodel, truth.json), the screen's pixels under
+   --glass mm of cover glass (0.7 by default; rotstar-simulate --glass);
 3. the poses split into two groups A and B (folders of links to the pose
    folders: blocks of as many poses as cameras alternately, so that each
    group has the poses drawn for each camera);
@@ -23,7 +24,8 @@ The chain, each command printed (stderr) before it runs:
    detector, saddle: the Lucchese-Mitra fit on the checkerboard frame,
    started from rotstar's corners; both from the same poses):
    rotstar-detect --method, then rotstar-calibrate --corners (one joint
-   mrcal-calibrate-cameras solve of all cameras, LENSMODEL_OPENCV8);
+   mrcal-calibrate-cameras solve of all cameras, LENSMODEL_OPENCV8, then the
+   cover glass estimated and taken out when it is a plausible glass);
 5. per method (rotstar_mrcal.evaluate.stereo.evaluate): each camera of each
    calibration against the true camera, camera 1's baseline and rotation
    against the truth, the cross-validation of A against B, and the depth
@@ -31,12 +33,14 @@ The chain, each command printed (stderr) before it runs:
    corners seen by the true cameras, rectified with the calibrated pair by
    mrcal.rectified_system, depth from the disparity by mrcal.stereo_range),
    without noise and with the method's own corner noise (its corners
-   against the true ones, RMS per coordinate);
+   against the true ones, RMS per coordinate); and the glass: the thickness
+   each calibration estimated, and the plain joint solve (before the
+   correction) against the truth beside the written one;
 6. OUT/stereo/results.json (rotstar-stereo/1) and rotstar-report over it
    (OUT/report/index.html).
 
 stdout: the tables (Markdown); a full run (not --quick, the default seed
-and poses, no --rgb) also writes them into the marked blocks of
+and poses, the default glass, no --rgb) also writes them into the marked blocks of
 doc/validation.md (stereo:tables) and README.md (stereo:headline);
 --no-docs: not.
 """
@@ -59,11 +63,14 @@ import time  # noqa: E402
 import mrcal  # noqa: E402
 import numpy as np  # noqa: E402
 
+from rotstar_lab.benchmark.glass import observed_corners  # noqa: E402
+from rotstar_lab.benchmark.glassrender import same_noise_reference, true_grids  # noqa: E402
 from rotstar_lab.docblock import rewrite_block  # noqa: E402
 from rotstar_lab.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
 from rotstar_mrcal.calibrate.rig import camera_of  # noqa: E402
 from rotstar_mrcal.evaluate import depth, stereo  # noqa: E402
 from rotstar_mrcal.evaluate.stereo import pose_of_path  # noqa: E402
+from rotstar_mrcal.optics.refraction import Glass  # noqa: E402
 from rotstar_mrcal.report import stereo as stereoreport  # noqa: E402
 from rotstar_mrcal.simulate.rig import load_rig_truth  # noqa: E402
 from rotstar_mrcal.vnl import read_corners  # noqa: E402
@@ -81,6 +88,7 @@ METHODS = ("rotstar", "saddle")
 LENSMODEL = "LENSMODEL_OPENCV8"
 SUPERSAMPLE = 2
 LENS = "coma=1.5,focus=0.3"  # make demo's lens (rotstar_lab.demo.scene), for every camera of the rig
+GLASS_MM = 0.7  # the screen's cover glass (issue 22: laminated tablets 0.5-1.5 mm), index 1.5
 
 
 def parse_args(argv=None):
@@ -92,6 +100,8 @@ def parse_args(argv=None):
                    help=f"board poses in all, split into the groups A and B (default {DEFAULT_POSES}; with --rgb "
                    f"{DEFAULT_POSES * 3 // 2}, as the colour camera's narrower field sees fewer whole boards)")
     p.add_argument("--rgb", action="store_true", help="add the D435's colour camera (camera 2) to the rig")
+    p.add_argument("--glass", type=float, default=GLASS_MM,
+                   help=f"the screen's cover glass, mm (default {GLASS_MM}; 0: none)")
     p.add_argument("--quick", action="store_true", help="half the poses, 30 with --rgb (a smoke run)")
     p.add_argument("--no-docs", action="store_true", help="do not rewrite README.md and doc/validation.md")
     return p.parse_args(argv)
@@ -107,8 +117,8 @@ def simulate(a, out: str) -> tuple[str, int]:
     pat, seq = os.path.join(out, "pattern"), os.path.join(out, "seq")
     run(["rotstar-pattern", "--out", short_path(pat)], stdout=subprocess.DEVNULL)
     cmd = ["rotstar-simulate", "--rig", "d435", "--poses", str(a.poses), "--seed", str(a.seed), "--pattern",
-           short_path(pat), "--supersample", str(SUPERSAMPLE), "--seidel", LENS, "--jobs", str(a.jobs),
-           "--out", short_path(seq)]
+           short_path(pat), "--supersample", str(SUPERSAMPLE), "--seidel", LENS, "--glass", f"{a.glass:g}",
+           "--jobs", str(a.jobs), "--out", short_path(seq)]
     run(cmd + (["--rgb"] if a.rgb else []), stdout=subprocess.DEVNULL)
     ncam = 3 if a.rgb else 2
     poses = sorted(p for p in os.listdir(seq) if p.startswith("pose"))
@@ -141,8 +151,12 @@ def calibrate(a, out: str, ncam: int) -> dict:
     return cals, vnls
 
 
-def corner_rms(vnls, truth) -> float:
-    """RMS (per coordinate, px) of a method's corners against the true projections, over its corners files"""
+def corner_rms(vnls, truth, glass_mm: float = 0.0) -> float:
+    """RMS (per coordinate, px) of a method's corners against the true projections, over its corners files
+
+    Through a cover glass the true projection is the refracted one (where the
+    emitting point is seen through the glass; rotstar_lab.benchmark.glass).
+    """
     lay = truth.layout
     d = []
     for vnl in vnls:
@@ -151,9 +165,37 @@ def corner_rms(vnls, truth) -> float:
         for fn, q in found.items():
             pose, k = pose_of_path(fn, set(truth.corners)), camera_of(fn)
             if q is not None and pose and k in truth.corners[pose]:
-                d.append((q - truth.corners[pose][k]).reshape(-1, 2))
+                true = truth.corners[pose][k]
+                if glass_mm:
+                    rt = mrcal.compose_rt(truth.models[k].extrinsics_rt_fromref(), truth.rt_ref_board[pose])
+                    true = observed_corners(truth.models[k], lay, rt[None], Glass.mm(glass_mm))[0]
+                d.append((q - true).reshape(-1, 2))
     d = np.concatenate(d)
     return float(np.sqrt(np.nanmean(d**2)))
+
+
+def vs_truth(models, truth) -> dict:
+    """A pair's cameras and camera 1's pose against the truth, as evaluate.stereo.evaluate's truth"""
+    return {"cameras": [stereo.camera_truth_error(m, tm, truth.rt_ref_board).summary()
+                        for m, tm in zip(models, truth.models)],
+            "extrinsics": stereo.extrinsics_error(models[:2], tuple(truth.models[:2])).summary()}
+
+
+def glass_effect(files: list, truth, glass_mm: float) -> dict:
+    """What rotstar-calibrate found about the glass in one calibration (its calibration.json); the plain joint
+    solve before the correction (candidates/rig/) and its same-noise reference (the glass-free solve with the
+    calibration's own corner errors, rotstar_lab.benchmark.glassrender) against the truth"""
+    cdir = os.path.dirname(files[0])
+    with open(os.path.join(cdir, "calibration.json")) as f:
+        g = json.load(f).get("glass") or {}
+    plain = [mrcal.cameramodel(os.path.join(cdir, "candidates", "rig", os.path.basename(fn))) for fn in files[:2]]
+    oi = plain[0].optimization_inputs()
+    rts = {(p, k): mrcal.compose_rt(m.extrinsics_rt_fromref(), rt)
+           for p, rt in truth.rt_ref_board.items() for k, m in enumerate(truth.models)}
+    ref, _ = same_noise_reference(oi, *true_grids(truth.models, truth.layout, rts, Glass.mm(glass_mm), oi))
+    reference = [mrcal.cameramodel(optimization_inputs=ref, icam_intrinsics=k) for k in range(len(plain))]
+    return {**{k: g.get(k) for k in ("thickness_mm", "sigma_mm", "applied", "reason")},
+            "plain": vs_truth(plain, truth), "reference": vs_truth(reference, truth)}
 
 
 def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
@@ -166,10 +208,11 @@ def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
     for m, groups in cals.items():
         t = time.monotonic()
         models = {g: [mrcal.cameramodel(f) for f in files] for g, files in groups.items()}
-        noise = corner_rms(vnls[m], truth)
+        noise = corner_rms(vnls[m], truth, a.glass)
         r = stereo.evaluate(m, {g: tuple(v[:2]) for g, v in models.items()}, true, truth.rt_ref_board, pts,
                             noise_px=noise, seed=a.seed)
         r["corner_rms_px"] = noise
+        r["glass"] = {g: glass_effect(files, truth, a.glass) for g, files in groups.items()}
         for g, v in models.items():  # the colour camera (--rgb): against its truth too
             for k in range(2, len(v)):
                 r["truth"][g]["cameras"].append(
@@ -184,6 +227,9 @@ def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
              f"camera 0 with a lens and a small rotation of its own{'; the colour camera as camera 2' if a.rgb else ''}; "
              "every camera through make demo's lens (Seidel coma 1.5 and focus 0.3 waves at the image corners, "
              "its centroid on the chief ray; the right imager's x0.9, the colour camera's x1.1). "
+             + (f"The screen's pixels lie under {a.glass:g} mm of cover glass (index 1.5; rotstar-simulate --glass): "
+                "every ray is refracted on its way to them, and rotstar-calibrate estimates the thickness and "
+                "takes it out. " if a.glass else "The screen has no cover glass. ") +
              f"{a.poses} board poses (iPad, 14 x 9 corners, 0.3-0.6 m) split into groups A ({nA} poses) and "
              f"B ({nB}); each group calibrated jointly with mrcal ({LENSMODEL}) from rotstar's corners and from "
              "the saddle fit's (the best checkerboard detector of the demo) of the same poses. Held-out boards "
@@ -191,7 +237,8 @@ def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
              f"{', '.join(f'{z:g}' for z in pts)} m, 20 degrees of tilt, over the field of view both cameras "
              "share.")
     return {"format": "rotstar-stereo/1", "label": "simulated D435 infrared pair", "setup": setup,
-            "distances": sorted(pts), "seed": a.seed, "poses": a.poses, "rgb": a.rgb, "methods": methods}
+            "distances": sorted(pts), "seed": a.seed, "poses": a.poses, "rgb": a.rgb, "glass_mm": a.glass,
+            "methods": methods}
 
 
 def write_docs(result: dict, seconds: float) -> None:
@@ -238,7 +285,7 @@ def main(argv=None) -> int:
           "(also index.md)")
     print()
     print(stereoreport.section(result))
-    if not (a.no_docs or a.quick or a.rgb or a.seed != DEFAULT_SEED or not full):
+    if not (a.no_docs or a.quick or a.rgb or a.seed != DEFAULT_SEED or a.glass != GLASS_MM or not full):
         write_docs(result, clock.elapsed())
     clock.finish()
     return 0
