@@ -163,44 +163,58 @@ def render(model: mrcal.cameramodel, rt: np.ndarray) -> np.ndarray:
     return loop_irradiance(LAYOUT, model, rt)
 
 
-def capture_all(work: str, n: int, seed: int, overhead: float) -> dict:
-    """(a)'s n poses both ways, then (b)'s further short poses until today's total time; the datasets' logs"""
+def capture_all(work: str, n: int, seed: int, overhead: float, control: bool = False) -> dict:
+    """(a)'s n poses both ways, then (b)'s further short poses until today's total time; the datasets' summaries
+
+    control: today's capture of (b)'s further poses too (a calibration that
+    tells what the capture costs from what the detector and the poses do).
+    """
     model = half_d435()
     rts = np.concatenate([simulate.random_poses(model, LAYOUT, n, np.random.default_rng([23, seed])),
                           simulate.random_poses(model, LAYOUT, 12 * n, np.random.default_rng([24, seed]))])
-    ds = {k: OutputDataset(os.path.join(work, k), None) for k in ("today", "short")}
+    ds = {k: OutputDataset(os.path.join(work, k), None) for k in SETTINGS}
     raw = os.path.join(work, "raw")
-    cost = {"today": [], "short": []}  # seconds at the screen per pose, the overhead included
+    cost = {k: [] for k in SETTINGS}  # seconds at the screen per pose, the overhead included
     for k, rt in enumerate(rts):
-        budget = sum(cost["today"])
+        budget = sum(cost["today"][:n])
         if k >= n and sum(cost["short"]) >= budget:
             break
         E, pose = render(model, rt), f"pose{k:03d}"
-        for name, hold in SETTINGS.items():
-            if name == "today" and k >= n:
-                continue
-            e = capture_pose(E, hold, ds[name], pose, raw, np.random.default_rng([25, seed, k, hold or 0]))
-            if name == "short" and k >= n and sum(cost["short"]) + e["seconds"] + overhead > budget:
-                shutil.rmtree(os.path.join(ds[name].folder, pose), ignore_errors=True)  # over the time: not taken
-                ds[name].log.pop()
-                return finish(work, model, rts, ds, cost, n)
-            cost[name].append(e["seconds"] + overhead)
+        e = capture_pose(E, SETTINGS["short"], ds["short"], pose, raw, np.random.default_rng([25, seed, k, 0]))
+        if k >= n and sum(cost["short"]) + e["seconds"] + overhead > budget:
+            shutil.rmtree(os.path.join(ds["short"].folder, pose), ignore_errors=True)  # over the time: not taken
+            ds["short"].log.pop()
+            break
+        cost["short"].append(e["seconds"] + overhead)
+        if k < n or control:
+            e = capture_pose(E, SETTINGS["today"], ds["today"], pose, raw, np.random.default_rng([25, seed, k, 30]))
+            cost["today"].append(e["seconds"] + overhead)
     return finish(work, model, rts, ds, cost, n)
 
 
-def finish(work: str, model, rts, ds: dict, cost: dict, n: int) -> dict:
-    """The truth beside each dataset; (a)'s short dataset made of (b)'s first n poses; the datasets' summaries"""
-    same = os.path.join(work, "short-same")
-    shutil.rmtree(same, ignore_errors=True)
-    os.makedirs(same)
-    shutil.copy(os.path.join(ds["short"].folder, "pattern.json"), same)
-    for e in ds["short"].log[:n]:
+def first_poses(ds: OutputDataset, folder: str, n: int) -> str:
+    """A dataset of the first n poses of ds (copies); its folder"""
+    shutil.rmtree(folder, ignore_errors=True)
+    os.makedirs(folder)
+    shutil.copy(os.path.join(ds.folder, "pattern.json"), folder)
+    for e in ds.log[:n]:
         if e.get("ok"):
-            shutil.copytree(e["folder"], os.path.join(same, e["pose"]))
+            shutil.copytree(e["folder"], os.path.join(folder, e["pose"]))
+    return folder
+
+
+def finish(work: str, model, rts, ds: dict, cost: dict, n: int) -> dict:
+    """The datasets of the table (today's and the short capture's first n poses, all short ones, all of today's
+    with the control), each with its truth; {row: summary}"""
+    today, short = ds["today"], ds["short"]
+    rows = {"today": (first_poses(today, os.path.join(work, "today-same"), n) if len(today.log) > n
+                      else today.folder, today.log[:n], cost["today"][:n]),
+            "short-same": (first_poses(short, os.path.join(work, "short-same"), n), short.log[:n], cost["short"][:n]),
+            "short-more": (short.folder, short.log, cost["short"])}
+    if len(today.log) > n:
+        rows["today-more"] = (today.folder, today.log, cost["today"])
     out = {}
-    for name, folder, log, c in (("today", ds["today"].folder, ds["today"].log, cost["today"]),
-                                 ("short-same", same, ds["short"].log[:n], cost["short"][:n]),
-                                 ("short-more", ds["short"].folder, ds["short"].log, cost["short"])):
+    for name, (folder, log, c) in rows.items():
         write_truth_of(folder, model, {f"pose{k:03d}": rts[k] for k in range(len(log))})
         secs = [e["seconds"] for e in log]
         out[name] = {"folder": folder, "poses": len(log), "kept": sum(bool(e.get("ok")) for e in log),
@@ -218,9 +232,12 @@ def table(res: dict, overhead: float, seed: int) -> str:
             "median vs today | mrcal's uncertainty, median px (vs today) |",
             "|---|---|---|---|---|---|---|---|"]
     names = {"today": "today: hold 30, 2.2 loops", "short-same": "short holds, until enough: the same poses",
-             "short-more": "short holds, until enough: more poses in the same time"}
+             "short-more": "short holds, until enough: more poses in the same time",
+             "today-more": "control: hold 30, 2.2 loops, on the poses of the row above"}
     ref, sref = res["today"].get("median_px", np.nan), res["today"].get("sigma_px", np.nan)
     for k, label in names.items():
+        if k not in res:
+            continue
         r = res[k]
         cal = (f"{r['median_px']:.4f} / {r['worst_px']:.4f}" if "median_px" in r else r.get("error", "-"))
         rows.append(f"| {label} | {r['poses']} ({r['kept']} / {r.get('boards', '-')}) | {r['seconds_median']:.1f} "
@@ -242,19 +259,22 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--overhead", type=float, default=1.0,
                    help="seconds per pose besides the recording: moving the camera, --auto's stillness (default 1)")
+    p.add_argument("--control", action="store_true", help="also today's capture of (b)'s poses: what today's hold "
+                   "gives from as many poses (takes twice as long)")
     p.add_argument("--work", default="capture-calib-bench", help="work folder (replaced)")
     p.add_argument("--doc", action="store_true", help="rewrite the table in doc/capture.md")
     a = p.parse_args(argv)
     t0 = time.time()
     shutil.rmtree(a.work, ignore_errors=True)
-    res = capture_all(a.work, a.poses, a.seed, a.overhead)
+    res = capture_all(a.work, a.poses, a.seed, a.overhead, a.control)
     for k, r in res.items():
         say(f"calibrating {k}: {r['kept']} poses with a board")
         r.update(calibrate(r["folder"]))
     with open(os.path.join(a.work, "results.json"), "w") as f:
         json.dump(res, f, indent=1)
-    text = table(res, a.overhead, a.seed) + (f"\n\n*Written by `make capture-calib-bench` "
-                                             f"(scripts/capture_calib_bench.py --poses {a.poses} --seed {a.seed}, "
+    text = table(res, a.overhead, a.seed) + (f"\n\n*Written by scripts/capture_calib_bench.py --poses {a.poses} "
+                                             f"--seed {a.seed}{' --control' if a.control else ''} (`make "
+                                             f"capture-calib-bench` runs it with the defaults), "
                                              f"{time.time() - t0:.0f} s).*")
     print(text)
     if a.doc:

@@ -57,7 +57,10 @@ def row(median, sigma, poses=10):
 def test_the_table_says_which_target_is_met():
     text = B.table({"today": row(0.02, 0.02), "short-same": row(0.024, 0.025), "short-more": row(0.03, 0.007, 58)},
                    1.0, 0)
-    assert "| 58 (58 / 58) |" in text and "| 1.50x | 0.0070 (0.35x) |" in text
+    assert "| 58 (58 / 58) |" in text and "| 1.50x | 0.0070 (0.35x) |" in text and "control" not in text
+    control = B.table({"today": row(0.02, 0.02), "short-same": row(0.024, 0.025), "short-more": row(0.03, 0.007, 58),
+                       "today-more": row(0.015, 0.006, 58)}, 1.0, 0)
+    assert "| control: hold 30, 2.2 loops, on the poses of the row above | 58 (58 / 58) |" in control
     assert "(a) the same poses: 1.20x today's median (target <= 1.25x): met" in text
     assert "(b) the same time on more poses: 1.50x today's median (target < 1): NOT met" in text
     failed = B.table({"today": row(0.02, 0.02), "short-same": {**row(0, 0), "median_px": np.nan} | {"error": "x"},
