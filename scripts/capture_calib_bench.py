@@ -57,7 +57,7 @@ from rotstar_lab.docblock import rewrite_block
 from rotstar_mrcal import simulate
 from rotstar_mrcal.capture.segment import Options
 from rotstar_mrcal.capture.session import OutputDataset, SessionOptions, capture_one
-from rotstar_mrcal.capture.simulated import ALL_FLAWS, loop_irradiance, record_player
+from rotstar_mrcal.capture.simulated import ALL_FLAWS, Flaws, loop_irradiance, record_player
 from rotstar_mrcal.capture.source import ArraySource
 from rotstar_mrcal.cli.capture import first_look, frames_per_recording
 from rotstar_mrcal.evaluate.truth import truth_error, truth_poses_of
@@ -95,13 +95,14 @@ def cli_args(hold) -> types.SimpleNamespace:
     return types.SimpleNamespace(frames=None, loops=LOOPS, refresh=REFRESH, hold=hold)
 
 
-def capture_pose(E: np.ndarray, hold, ds: OutputDataset, pose: str, raw: str, rng) -> dict:
-    """One pose filmed with every flaw and taken by capture_one, as rotstar-capture takes it; its log entry"""
+def capture_pose(E: np.ndarray, hold, ds: OutputDataset, pose: str, raw: str, rng,
+                 flaws: Flaws = ALL_FLAWS) -> dict:
+    """One pose filmed with the flaws and taken by capture_one, as rotstar-capture takes it; its log entry"""
     a = cli_args(hold)
     holds = entry_holds(LOOP, hold)
     nframes = frames_per_recording(a, holds, FPS)
     n = int(nframes * 1.05) + 2  # the camera streams on; frames the driver loses leave the recording short
-    frames, seq = record_player(E, holds, n, ALL_FLAWS, fps=FPS, exposure_s=EXPOSURE_S, refresh_hz=REFRESH,
+    frames, seq = record_player(E, holds, n, flaws, fps=FPS, exposure_s=EXPOSURE_S, refresh_hz=REFRESH,
                                 start_entry=int(rng.integers(len(LOOP))), start_phase=float(rng.uniform()),
                                 rng=rng, noise=0.01)
     opts = SessionOptions(Options(hold=hold or 0, refresh_hz=REFRESH), False,
@@ -163,7 +164,8 @@ def render(model: mrcal.cameramodel, rt: np.ndarray) -> np.ndarray:
     return loop_irradiance(LAYOUT, model, rt)
 
 
-def capture_all(work: str, n: int, seed: int, overhead: float, control: bool = False) -> dict:
+def capture_all(work: str, n: int, seed: int, overhead: float, control: bool = False,
+                flaws: Flaws = ALL_FLAWS) -> dict:
     """(a)'s n poses both ways, then (b)'s further short poses until today's total time; the datasets' summaries
 
     control: today's capture of (b)'s further poses too (a calibration that
@@ -180,14 +182,16 @@ def capture_all(work: str, n: int, seed: int, overhead: float, control: bool = F
         if k >= n and sum(cost["short"]) >= budget:
             break
         E, pose = render(model, rt), f"pose{k:03d}"
-        e = capture_pose(E, SETTINGS["short"], ds["short"], pose, raw, np.random.default_rng([25, seed, k, 0]))
+        e = capture_pose(E, SETTINGS["short"], ds["short"], pose, raw, np.random.default_rng([25, seed, k, 0]),
+                         flaws)
         if k >= n and sum(cost["short"]) + e["seconds"] + overhead > budget:
             shutil.rmtree(os.path.join(ds["short"].folder, pose), ignore_errors=True)  # over the time: not taken
             ds["short"].log.pop()
             break
         cost["short"].append(e["seconds"] + overhead)
         if k < n or control:
-            e = capture_pose(E, SETTINGS["today"], ds["today"], pose, raw, np.random.default_rng([25, seed, k, 30]))
+            e = capture_pose(E, SETTINGS["today"], ds["today"], pose, raw, np.random.default_rng([25, seed, k, 30]),
+                             flaws)
             cost["today"].append(e["seconds"] + overhead)
     return finish(work, model, rts, ds, cost, n)
 
@@ -223,10 +227,11 @@ def finish(work: str, model, rts, ds: dict, cost: dict, n: int) -> dict:
     return out
 
 
-def table(res: dict, overhead: float, seed: int) -> str:
+def table(res: dict, overhead: float, seed: int, flaws: bool = True) -> str:
     """The Markdown table of the three calibrations (module doc) and the two verdicts"""
     head = (f"Calibration against the truth, D435 at half size (640 x 400, OPENCV8), an 800 x 600 test pattern "
-            f"(6 x 4 corners, 20 loop entries), every timing flaw on, 60 Hz, {FPS:g} fps, 8 ms, seed {seed}:")
+            f"(6 x 4 corners, 20 loop entries), {'every timing flaw on' if flaws else 'no timing flaw'}, 60 Hz, "
+            f"{FPS:g} fps, 8 ms, seed {seed}:")
     rows = ["| capture | poses (with a board / calibrated) | s per pose: median (max) | total at the screen, s "
             f"(+ {overhead:g} s a pose) | corner error, median px | calibration vs truth, px: median / worst | "
             "median vs today | mrcal's uncertainty, median px (vs today) |",
@@ -253,6 +258,13 @@ def table(res: dict, overhead: float, seed: int) -> str:
     return "\n".join([head, "", *rows, "", *verdict])
 
 
+def footer(a, seconds: float) -> str:
+    """The line under the table: the command that wrote it"""
+    opts = (" --control" if a.control else "") + (" --no-flaws" if a.no_flaws else "")
+    return (f"*Written by scripts/capture_calib_bench.py --poses {a.poses} --seed {a.seed}{opts} "
+            f"(`make capture-calib-bench` runs it with the defaults), {seconds:.0f} s).*")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--poses", type=int, default=10, help="poses of (a), captured both ways (default 10)")
@@ -261,21 +273,20 @@ def main(argv=None) -> int:
                    help="seconds per pose besides the recording: moving the camera, --auto's stillness (default 1)")
     p.add_argument("--control", action="store_true", help="also today's capture of (b)'s poses: what today's hold "
                    "gives from as many poses (takes twice as long)")
+    p.add_argument("--no-flaws", action="store_true", help="a perfect screen and camera (no timing flaw; the panel "
+                   "still scans out over a refresh)")
     p.add_argument("--work", default="capture-calib-bench", help="work folder (replaced)")
     p.add_argument("--doc", action="store_true", help="rewrite the table in doc/capture.md")
     a = p.parse_args(argv)
     t0 = time.time()
     shutil.rmtree(a.work, ignore_errors=True)
-    res = capture_all(a.work, a.poses, a.seed, a.overhead, a.control)
+    res = capture_all(a.work, a.poses, a.seed, a.overhead, a.control, Flaws() if a.no_flaws else ALL_FLAWS)
     for k, r in res.items():
         say(f"calibrating {k}: {r['kept']} poses with a board")
         r.update(calibrate(r["folder"]))
     with open(os.path.join(a.work, "results.json"), "w") as f:
         json.dump(res, f, indent=1)
-    text = table(res, a.overhead, a.seed) + (f"\n\n*Written by scripts/capture_calib_bench.py --poses {a.poses} "
-                                             f"--seed {a.seed}{' --control' if a.control else ''} (`make "
-                                             f"capture-calib-bench` runs it with the defaults), "
-                                             f"{time.time() - t0:.0f} s).*")
+    text = table(res, a.overhead, a.seed, not a.no_flaws) + "\n\n" + footer(a, time.time() - t0)
     print(text)
     if a.doc:
         doc = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "doc", "capture.md")
