@@ -200,7 +200,7 @@ def test_docs_have_the_blocks_the_commands_write():
     for path, name in (("README.md", "bench:summary"), ("doc/benchmark.md", "bench:result"),
                        ("README.md", "bench:partial"), ("doc/benchmark.md", "bench:partial"),
                        ("doc/benchmark.md", "bench:calibration"), ("README.md", "demo:headline"),
-                       ("doc/validation.md", "demo:headline")):
+                       ("doc/validation.md", "demo:headline"), ("doc/capture.md", "capture-calib-bench")):
         with open(os.path.join(root, path)) as f:
             text = f.read()
         assert text.count(f"<!-- {name}:begin -->") == 1 and text.count(f"<!-- {name}:end -->") == 1, (path, name)
