@@ -33,16 +33,17 @@ ifeq ($(UV),)
 UV := $(CURDIR)/.tools/bin/uv
 endif
 
-.PHONY: help setup test test-slow demo stereo bench calib-bench coverage-bench capture-calib-bench glass-bench blur-map-doc pip-check clean check-python system-deps python
+.PHONY: help setup test test-slow demo stereo bench calib-bench coverage-bench capture-calib-bench display-bench glass-bench blur-map-doc pip-check clean check-python system-deps python
 
 help:
 	@echo "make demo   - pattern, simulated D435 capture, detection, mrcal calibration (all set-up included)"
 	@echo "make test   - run the test suite (all set-up included)"
 	@echo "make test-slow - the long end-to-end tests that make test leaves out"
 	@echo "make stereo - simulated D435 stereo pair: joint calibrations vs the truth, cross-validation, depth error at 0.5/1/2 m"
-	@echo "make bench  - accuracy and speed against OpenCV and mrgingham, partial views against ChArUco, each method's failure modes, then calib-bench, coverage-bench and capture-calib-bench"
+	@echo "make bench  - accuracy and speed against OpenCV and mrgingham, partial views against ChArUco, each method's failure modes, then calib-bench, coverage-bench, display-bench and capture-calib-bench"
 	@echo "make calib-bench - rotstar-calibrate's default model vs rotstar-detect's printed command (12/20/40 poses); a cover glass (0-1.5 mm) plain vs corrected, exact and rendered, one camera and the stereo pair"
 	@echo "make coverage-bench - mrcal's uncertainty with and without boards hanging over the imager's edges"
+	@echo "make display-bench - a display showing the frames like a real monitor (per-frame maps): poses kept, maps, calibration vs a clean display (20 D435 poses)"
 	@echo "make capture-calib-bench - seconds at the screen: today's 25 s capture vs the short one, calibrated vs the truth (about 7 min)"
 	@echo "make glass-bench - a screen's cover glass (0-1.5 mm): plain calibration vs rotstar-calibrate's correction (20/40 poses)"
 	@echo "make blur-map-doc - doc/img/blur-map.png: rotstar-detect --blur-map on a simulated D435 with strong coma"
@@ -99,6 +100,7 @@ bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/bench.py $(BENCH_ARGS)
 	$(MAKE) calib-bench
 	$(MAKE) coverage-bench
+	$(MAKE) display-bench
 	$(MAKE) capture-calib-bench
 
 # writes its tables into doc/validation.md (between the calib-bench and calib-bench-glass markers)
@@ -108,6 +110,10 @@ calib-bench: setup
 # writes its table into doc/uncertainty.md (between the coverage-bench markers) and doc/img/coverage/
 coverage-bench: setup
 	$(RUN) $(VENV_BIN)/python scripts/coverage_bench.py --work coverage-bench-out --doc
+
+# writes its table into doc/detector.md (between the display-bench markers); renders 2 x 21 D435 poses (minutes)
+display-bench: setup
+	$(RUN) $(VENV_BIN)/python scripts/display_bench.py --poses 20 --work display-bench-out --doc
 
 # writes its table into doc/capture.md (between the capture-calib-bench markers); about 7 min on 2 cores
 capture-calib-bench: setup
@@ -128,4 +134,4 @@ pip-check: check-python
 	PYTHON=$(PYTHON) $(VENV_BIN)/python -m pytest -q -s -m slow tests/cli/test_pip_install.py
 
 clean:
-	rm -rf .venv .tools $(DEMO_DIR) $(STEREO_DIR) .pytest_cache calib-bench-out coverage-bench-out capture-calib-bench-out glass-bench-out $(BLURMAP_DIR)
+	rm -rf .venv .tools $(DEMO_DIR) $(STEREO_DIR) .pytest_cache calib-bench-out coverage-bench-out capture-calib-bench-out display-bench-out glass-bench-out $(BLURMAP_DIR)
