@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import fcntl
+import importlib.util
 import math
 import os
 import signal
@@ -96,6 +97,15 @@ def d435_seq(tmp_path_factory) -> SimSeq:
                               extra={"camera": "d435"})
         done.touch()
     return SimSeq(seq, truth, layout)
+
+
+def lab_script(name: str):
+    """scripts/NAME.py (a lab driver, not a package module) loaded as a module, for its functions"""
+    fn = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts", f"{name}.py")
+    spec = importlib.util.spec_from_file_location(name, fn)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def cli_env() -> dict:

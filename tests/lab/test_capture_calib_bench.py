@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import os
 
 import mrcal
@@ -16,16 +15,10 @@ from rotstar_mrcal.simulate.dataset import load_truth
 from rotstar_mrcal.simulate.poses import random_poses
 from rotstar_mrcal.vnl import write_corners
 
-
-def bench_script():
-    fn = os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "capture_calib_bench.py")
-    spec = importlib.util.spec_from_file_location("capture_calib_bench", fn)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from conftest import lab_script
 
 
-B = bench_script()
+B = lab_script("capture_calib_bench")
 
 
 def test_the_half_size_d435_sees_what_the_d435_sees_at_half_scale():

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import os
 import subprocess
@@ -15,15 +14,14 @@ from rotstar_lab.docblock import rewrite_block
 from rotstar_mrcal.detect.display_offsets import DisplayCheck
 from rotstar_mrcal.simulate.display import identity_maps, parse_display_maps
 
+from conftest import lab_script
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("display_bench", os.path.join(ROOT, "scripts", "display_bench.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return lab_script("display_bench")
 
 
 def fake(median: float, skipped: dict, kept: int = 3) -> dict:

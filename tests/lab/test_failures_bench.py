@@ -1,8 +1,6 @@
 """The failure-mode benchmark (benchmark/failures.py): its numbers, its tables, and a tiny run of it"""
 
-import importlib.util
 import math
-import os
 
 import mrcal
 import numpy as np
@@ -12,7 +10,7 @@ from rotstar_mrcal import simulate
 from rotstar_lab.benchmark import failures as F
 from rotstar_mrcal.simulate.poses import board_centre_m
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from conftest import lab_script
 
 
 def stats(rms, found=10, in_view=10, wrong=0, rejected=None):
@@ -90,9 +88,7 @@ def test_tiny_run():
 
 
 def test_bench_switch():
-    spec = importlib.util.spec_from_file_location("bench", os.path.join(ROOT, "scripts", "bench.py"))
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = lab_script("bench")
     a = bench.parse_args(["--poses", "0", "--partial", "0", "--whole", "0", "--failures", "1"])
     assert (a.poses, a.failures) == (0, 1)
     assert bench.parse_args(["--quick"]).failures == 1

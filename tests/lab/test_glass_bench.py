@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-import os
 
 import numpy as np
 import pytest
@@ -15,15 +13,13 @@ from rotstar_mrcal.simulate.camera import preset_model
 from rotstar_mrcal.simulate.dataset import true_corners
 from rotstar_mrcal.simulate.poses import random_poses
 
+from conftest import lab_script
+
 MODEL, LAYOUT = preset_model("d435"), make_layout()
 
 
 def bench_script():
-    fn = os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "glass_bench.py")
-    spec = importlib.util.spec_from_file_location("glass_bench", fn)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return lab_script("glass_bench")
 
 
 def test_observed_corners_without_glass_or_pupil_are_the_true_ones():
