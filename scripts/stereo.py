@@ -174,13 +174,6 @@ def corner_rms(vnls, truth, glass_mm: float = 0.0) -> float:
     return float(np.sqrt(np.nanmean(d**2)))
 
 
-def vs_truth(models, truth) -> dict:
-    """A pair's cameras and camera 1's pose against the truth, as evaluate.stereo.evaluate's truth"""
-    return {"cameras": [stereo.camera_truth_error(m, tm, truth.rt_ref_board).summary()
-                        for m, tm in zip(models, truth.models)],
-            "extrinsics": stereo.extrinsics_error(models[:2], tuple(truth.models[:2])).summary()}
-
-
 def glass_effect(files: list, truth, glass_mm: float) -> dict:
     """What rotstar-calibrate found about the glass in one calibration (its calibration.json); the plain joint
     solve before the correction (candidates/rig/) and its same-noise reference (the glass-free solve with the
@@ -195,7 +188,8 @@ def glass_effect(files: list, truth, glass_mm: float) -> dict:
     ref, _ = same_noise_reference(oi, *true_grids(truth.models, truth.layout, rts, Glass.mm(glass_mm), oi))
     reference = [mrcal.cameramodel(optimization_inputs=ref, icam_intrinsics=k) for k in range(len(plain))]
     return {**{k: g.get(k) for k in ("thickness_mm", "sigma_mm", "applied", "reason")},
-            "plain": vs_truth(plain, truth), "reference": vs_truth(reference, truth)}
+            "plain": stereo.pair_truth_error(plain, truth.models[:2], truth.rt_ref_board),
+            "reference": stereo.pair_truth_error(reference, truth.models[:2], truth.rt_ref_board)}
 
 
 def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:

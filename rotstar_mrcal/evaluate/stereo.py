@@ -255,6 +255,14 @@ def pair_stats(models) -> list[dict]:
     return out
 
 
+def pair_truth_error(pair, true_pair, rt_ref_board: dict, gridn_width: int = 40) -> dict:
+    """{"cameras": [camera_truth_error summary per camera], "extrinsics": extrinsics_error summary}: a calibrated
+    pair against the true one"""
+    return {"cameras": [camera_truth_error(m, tm, rt_ref_board, gridn_width).summary()
+                        for m, tm in zip(pair, true_pair)],
+            "extrinsics": extrinsics_error(pair, true_pair).summary()}
+
+
 def evaluate(method: str, pairs: dict, truth=None, rt_ref_board: dict | None = None, heldout: dict | None = None,
              noise_px: float = 0.0, seed: int = 0, gridn_width: int = 40) -> dict:
     """Every number of the stereo calibrations of one corner set (JSON-able)
@@ -275,9 +283,7 @@ def evaluate(method: str, pairs: dict, truth=None, rt_ref_board: dict | None = N
     if truth is not None:
         out["truth"] = {}
         for g, p in pairs.items():
-            t = {"cameras": [camera_truth_error(m, tm, rt_ref_board or {}, gridn_width).summary()
-                             for m, tm in zip(p, truth)],
-                 "extrinsics": extrinsics_error(p, truth).summary()}
+            t = pair_truth_error(p, truth, rt_ref_board or {}, gridn_width)
             if heldout:
                 t["depth"] = dp.depth_error(heldout, truth, p).summary()
                 if noise_px:
