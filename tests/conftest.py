@@ -19,14 +19,22 @@ runs the tests (its bin/ first on PATH, as `make test` does).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import fcntl
+import functools
+import importlib.metadata
 import importlib.util
 import math
+import multiprocessing.forkserver
+import multiprocessing.resource_tracker
 import os
+import select
 import signal
 import subprocess
 import sys
+import threading
+import traceback
 import zlib
 
 import numpy as np
@@ -123,15 +131,106 @@ def ctrl_c_reaches_it() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+IN_PROCESS = os.environ.get("ROTSTAR_TEST_SUBPROCESS", "0") in ("", "0")
+"""Commands run in the test's own process (run_command): the console script's function with its argv, working
+folder, a closed stdin and its own stdout and stderr (file descriptors included, for the tools it starts), as
+the installed script runs it, without the 0.3-1 s of a new interpreter and its imports per run (measured: 250
+command runs in make test). ROTSTAR_TEST_SUBPROCESS=1 runs every one of them as a real process instead."""
+
+
+@functools.cache
+def _entry_point(tool: str):
+    """The function behind one of our console scripts (pyproject.toml's [project.scripts]); None for another tool"""
+    eps = importlib.metadata.entry_points(group="console_scripts", name=tool)
+    return next(iter(eps)).load() if tool.startswith("rotstar-") and eps else None
+
+
+class _Drain(threading.Thread):
+    """Reads a pipe (as subprocess.run's capture_output does, so that no writer blocks on a full pipe) until
+    stop(): what was written by then, not an end of file that a process the command started (the forkserver of
+    its workers, which outlives the command here) would hold back"""
+
+    def __init__(self, fd: int):
+        super().__init__(daemon=True)
+        self.fd, self.data, self.stopped = fd, bytearray(), False
+        self.start()
+
+    def run(self):
+        while True:
+            ready, _, _ = select.select([self.fd], [], [], 0.05)
+            chunk = os.read(self.fd, 1 << 16) if ready else b""
+            self.data += chunk
+            if not chunk and (self.stopped or ready):
+                break
+        os.close(self.fd)
+
+    def text(self) -> str:
+        self.stopped = True
+        self.join()
+        return self.data.decode(errors="replace")
+
+
+def _run_here(fn, argv: list[str], cwd) -> subprocess.CompletedProcess:
+    """What `sys.exit(tool())` does in a new process with captured pipes, done in this one"""
+    saved = (sys.argv, sys.stdin, sys.stdout, sys.stderr, os.getcwd(), os.environ.get("PATH"))
+    multiprocessing.resource_tracker.ensure_running()  # started here, not inside with the command's pipes
+    multiprocessing.forkserver.ensure_running()  # (as parallel does); they outlive the command in this process
+    for f in (sys.stdout, sys.stderr):
+        f.flush()
+    fds = [os.dup(k) for k in (0, 1, 2)]
+    (out_r, out_w), (err_r, err_w) = os.pipe(), os.pipe()
+    out, err = _Drain(out_r), _Drain(err_r)
+    null = os.open(os.devnull, os.O_RDONLY)
+    for fd, k in ((null, 0), (out_w, 1), (err_w, 2)):
+        os.dup2(fd, k)
+        os.close(fd)
+    sys.stdin = open(0, closefd=False)
+    sys.stdout = open(1, "w", closefd=False)
+    sys.stderr = open(2, "w", closefd=False, buffering=1)
+    sys.argv = list(argv)
+    os.environ["PATH"] = cli_env()["PATH"]
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        code = fn()
+    except SystemExit as e:
+        code = e.code
+    except BaseException:  # the interpreter prints it and exits 1
+        traceback.print_exc()
+        code = 1
+    finally:
+        with contextlib.suppress(OSError, ValueError):
+            sys.stdout.flush()
+        if code is not None and not isinstance(code, int):  # sys.exit("message")
+            print(code, file=sys.stderr)
+            code = 1
+        sys.stderr.flush()
+        sys.argv, sys.stdin, sys.stdout, sys.stderr = saved[:4]
+        os.chdir(saved[4])
+        os.environ["PATH"] = saved[5]
+        for k, fd in enumerate(fds):
+            os.dup2(fd, k)
+            os.close(fd)
+    return subprocess.CompletedProcess(argv, code or 0, out.text(), err.text())
+
+
+def run_command(tool: str, *args, cwd=None, timeout=300, process: bool = False) -> subprocess.CompletedProcess:
+    """`tool args...` as the user runs it -> CompletedProcess (text, captured); see IN_PROCESS
+
+    process=True: always a real process (what needs one: signals, a time limit against a hang, the environment)
+    """
+    argv = [tool, *map(str, args)]
+    fn = _entry_point(tool)
+    if IN_PROCESS and not process and fn is not None:
+        return _run_here(fn, argv, cwd)
+    return subprocess.run([os.path.join(VENV_BIN, tool), *argv[1:]], capture_output=True, text=True,
+                          cwd=cwd, env=cli_env(), timeout=timeout)
+
+
 @pytest.fixture(scope="session")
 def run_cli():
-    """run_cli('rotstar-detect', arg, ...) -> CompletedProcess (text, captured)"""
-
-    def run(tool: str, *args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
-        return subprocess.run([os.path.join(VENV_BIN, tool), *map(str, args)], capture_output=True, text=True,
-                              cwd=cwd, env=cli_env(), timeout=timeout)
-
-    return run
+    """run_cli('rotstar-detect', arg, ...) -> CompletedProcess (text, captured): run_command"""
+    return run_command
 
 
 def huge_png(path, width=60000, height=60000):

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
+import multiprocessing
 import os
 
 import mrcal
@@ -37,6 +38,9 @@ from rotstar_mrcal.calibrate.solve import calibration_argv, focal_seed, resolve_
 from rotstar_mrcal.peers.registry import description
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
 from rotstar_mrcal.simulate.dataset import load_truth
+
+_WORKERS = multiprocessing.get_context("forkserver")
+"""The calibrations' and evaluations' processes: no fork of this threaded process (OpenCV, BLAS; see parallel)"""
 
 FORMAT = "rotstar-crossval/1"
 
@@ -176,7 +180,7 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
     for name, side, argv in cjobs:
         log(f"[{name} {side}] $ {cal.command_line(argv)}")
 
-    with cf.ProcessPoolExecutor(max(1, jobs)) as ex:
+    with cf.ProcessPoolExecutor(max(1, jobs), mp_context=_WORKERS) as ex:
         for name, side, err in ex.map(_calibrate, cjobs):
             step(f"calibrate {name} {side}", "failed" if err else "done")
             if err:
@@ -191,7 +195,7 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
                 loaded[n][0].seq, loaded[n][1].seq, gridn, distance) for n in todo}
     evals = {}
     if jobs > 1 and len(todo) > 1:
-        with cf.ProcessPoolExecutor(min(jobs, len(todo))) as ex:
+        with cf.ProcessPoolExecutor(min(jobs, len(todo)), mp_context=_WORKERS) as ex:
             futs = {ex.submit(_evaluate, *args[n]): n for n in todo}
             for f in cf.as_completed(futs):
                 evals[futs[f]] = f.result()

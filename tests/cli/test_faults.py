@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 import pytest
 
-from conftest import VENV_BIN, cli_env, ctrl_c_reaches_it
+from conftest import VENV_BIN, cli_env, ctrl_c_reaches_it, run_command
 from rotstar_mrcal import dataset
 from rotstar_mrcal.cli import common
 from rotstar_mrcal.pattern.layout import make_layout
@@ -51,9 +51,9 @@ def copy_seq(seq: str, dst, poses=("pose000", "pose001")) -> str:
     return out
 
 
-def cli(tool: str, *args, cwd=None, timeout=120) -> subprocess.CompletedProcess:
-    return subprocess.run([os.path.join(VENV_BIN, tool), *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, env=cli_env(), timeout=timeout)
+def cli(tool: str, *args, cwd=None, timeout=None) -> subprocess.CompletedProcess:
+    """The command as the user runs it (conftest.run_command); with a time limit (a hang): a real process"""
+    return run_command(tool, *args, cwd=cwd, timeout=timeout, process=timeout is not None)
 
 
 def one_line_error(r: subprocess.CompletedProcess, code: int = 2, *words: str) -> str:

@@ -3,13 +3,12 @@
 import json
 import re
 import math
-import subprocess
-import sys
 
 import cv2
 import numpy as np
 import pytest
 
+from conftest import run_command
 from rotstar_mrcal.pattern.layout import choose_marker, layout_from_dict, make_layout, marker_orbit
 from rotstar_mrcal.pattern.render import checker_coverage, decode_display, encode_display, render_frame
 
@@ -130,9 +129,8 @@ def test_gamma_roundtrip():
 
 def test_cli_writes_sequence(tmp_path):
     out = tmp_path / "pat"
-    r = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(out),
-                        "--screen", "800x600", "--pitch", "100", "--band", "24"],
-                       capture_output=True, text=True)
+    r = run_command("rotstar-pattern", "--out", str(out),
+                        "--screen", "800x600", "--pitch", "100", "--band", "24")
     assert r.returncode == 0, r.stderr
     assert "--object-spacing" in r.stderr and "--object-width-n 6" in r.stderr and "--object-height-n 4" in r.stderr
     assert "8 rotating-star frames, 10 identity frames, the checkerboard" in r.stderr
@@ -148,22 +146,19 @@ def test_cli_writes_sequence(tmp_path):
     assert sorted(p.name for p in out.glob("identity_*.png")) == [f"identity_{b:02d}.png" for b in range(10)]
     # --no-identity: the sequence of before
     lean = tmp_path / "lean"
-    r = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(lean),
-                        "--screen", "800x600", "--pitch", "100", "--band", "24", "--no-identity"],
-                       capture_output=True, text=True)
+    r = run_command("rotstar-pattern", "--out", str(lean),
+                        "--screen", "800x600", "--pitch", "100", "--band", "24", "--no-identity")
     assert r.returncode == 0, r.stderr
     assert "no identity frames" in r.stderr and not list(lean.glob("identity_*"))
     assert [f["kind"] for f in json.loads((lean / "pattern.json").read_text())["frames"]] == \
         ["rotstar"] * 8 + ["checkerboard"]
-    help_text = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--help"],
-                               capture_output=True, text=True).stdout
+    help_text = run_command("rotstar-pattern", "--help").stdout
     assert "--no-identity" in help_text and "partly out of view" in " ".join(help_text.split())
     # a grid too large for the code: one line, the way out named
-    big = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(tmp_path / "big"),
-                          "--screen", "8000x6000", "--pitch", "40", "--band", "10"], capture_output=True, text=True)
+    big = run_command("rotstar-pattern", "--out", str(tmp_path / "big"),
+                          "--screen", "8000x6000", "--pitch", "40", "--band", "10")
     assert big.returncode == 2 and big.stderr.strip().count("\n") == 0 and "add --no-identity" in big.stderr
-    bad = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(out), "--pitch", "99"],
-                         capture_output=True, text=True)
+    bad = run_command("rotstar-pattern", "--out", str(out), "--pitch", "99")
     assert bad.returncode == 2 and "even" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
 
 
@@ -212,8 +207,8 @@ def test_phase_frames_emit_a_sinusoid_through_the_display_gamma(tmp_path):
     """The PNG values are gamma-encoded; the light (decode_display of the PNG) is the sinusoid, and the 4-step
     phase at the corners is the corners' phase"""
     out = tmp_path / "pat"
-    r = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(out), "--screen", "800x600",
-                        "--pitch", "100", "--band", "24", "--paper-sequence"], capture_output=True, text=True)
+    r = run_command("rotstar-pattern", "--out", str(out), "--screen", "800x600",
+                        "--pitch", "100", "--band", "24", "--paper-sequence")
     assert r.returncode == 0, r.stderr
     assert "8 phase-shift frames (period 100 px), the checkerboard, the 16-segment star" in r.stderr
     L = layout_from_dict(json.loads((out / "pattern.json").read_text()))
@@ -238,6 +233,6 @@ def test_phase_frames_emit_a_sinusoid_through_the_display_gamma(tmp_path):
         cell = decode_display(star[y - 50 : y + 50, x - 50 : x + 50])
         assert np.allclose(cell, 1 - cell[::-1], atol=0.01) and abs(cell.mean() - 0.5) < 0.01
         assert np.array_equal(star[y - 40 : y + 40, x - 40 : x + 40], star[y + 39 : y - 41 : -1, x + 39 : x - 41 : -1])
-    bad = subprocess.run([sys.executable, "-m", "rotstar_mrcal.cli.pattern", "--out", str(tmp_path / "b"),
-                          "--star-segments", "12"], capture_output=True, text=True)
+    bad = run_command("rotstar-pattern", "--out", str(tmp_path / "b"),
+                          "--star-segments", "12")
     assert bad.returncode == 2 and "need --paper-sequence" in bad.stderr
