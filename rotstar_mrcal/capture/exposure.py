@@ -77,6 +77,8 @@ STEP_DOWN = 4.0  # after a clipped look
 STEP_UP = 8.0  # after a look that sees nothing
 MAX_LOOKS = 6
 BLOCK = 4  # block means of BLOCK x BLOCK pixels
+START_US = 8000.0  # the first look's exposure (a D435's default is 8500 us)
+SHORTEST_US = 20.0  # the shortest exposure a look tries
 
 
 @dataclasses.dataclass(frozen=True)
