@@ -621,6 +621,43 @@ def test_capture_cli_through_the_fake_d435(player_loop_frames, tmp_path, capsys,
     assert not fake.streaming and fake.fds == {}
 
 
+def test_capture_cli_auto_exposure_through_the_fake_d435(player_loop_frames, tmp_path, capsys, monkeypatch):
+    """No --exposure: the look sets the extension unit's exposure, the fake's brightness follows it (clipped at
+    8000 us, its start), and the pose is recorded at the exposure picked, into OUT/exp<us>us"""
+    import io
+    import json
+    import re
+    import sys
+
+    from rotstar_mrcal.capture.exposure import measure_look
+    from rotstar_mrcal.cli.capture import main as rotstar_capture
+
+    layout, loop = player_loop_frames
+    (tmp_path / "pattern.json").write_text(layout.to_json())
+    fake = FakeD435()
+    ir = fake.nodes["/dev/video2"]
+    set_to = []
+
+    def frames(k, w, h, code):
+        set_to.append(ir.xu[uvc_xu.D4XX.EXPOSURE][3])
+        return np.clip(loop[k % len(loop)].astype(float) * set_to[-1] / 4000, 0, 65535).astype("<u2")
+
+    fake.frames = frames
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\nq\n"))
+    code = rotstar_capture(["--pattern", str(tmp_path), "--out", str(tmp_path / "seq"), "--size", "640x400",
+                            "--hold", "18", "--frames", "360"], source=V4L2Source("/dev/video2", size=(640, 400),
+                                                                                 fps=25, sys=fake))
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    us = int(re.search(r"exposure: (\d+) us \(white at (\d+) % of full scale after 3 looks", err)[1])
+    white_4000 = measure_look(loop.astype(float), 65535).white  # the fake's white at 4000 us
+    assert abs(white_4000 * us / 4000 / 0.75 - 1) < 0.1
+    assert set_to[0] == 8000 and 2000 in set_to and set_to[-1] == us  # clipped at 8000: 4 times shorter, then
+    assert out.split() == [str(tmp_path / "seq" / f"exp{us}us" / "pose000")]
+    assert f"pose000 at {us} us: board complete (24/24)" in err
+    assert json.loads((tmp_path / "seq" / "capture.json").read_text())["auto_exposure"]["looks"] == 3
+
+
 def test_capture_cli_stops_when_a_control_fails(player_loop_frames, tmp_path, capsys, monkeypatch):
     import io
     import sys
