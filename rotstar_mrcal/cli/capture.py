@@ -74,8 +74,8 @@ multi-camera layout of doc/dataset.md), with a coverage picture per camera.
 Several exposures (--exposure 2000,4000,8000) give one dataset each,
 OUT/exp2000us, OUT/exp4000us, ..., to calibrate and compare separately.
 Without --exposure (or with --exposure auto) the capture first takes a
-short look at the playing screen (a few camera frames at a time, about a
-second or two) and picks the exposure that puts the pattern's white at 75 %
+short look at the playing screen (on Enter, or at once with --auto; a few
+camera frames at a time, about a second or two) and picks the exposure that puts the pattern's white at 75 %
 of full scale, unclipped, then records as if that exposure had been given
 (OUT/exp<us>us); a screen it cannot see or that is too dark even at the
 longest exposure stops it with the reason. --exposure keep leaves the
@@ -488,9 +488,19 @@ def _start(a, src, log: dict, holds) -> int:
 
 
 def _exposures_to_record(a, src, holds, log: dict) -> list[int | None]:
-    """--exposure's microseconds; auto: the one a look at the screen picks (said, logged); keep: [None]"""
+    """--exposure's microseconds; auto: the one a look at the screen picks (said, logged); keep: [None]
+
+    Without --auto the look waits for Enter (the camera must face the playing screen); --auto looks at once,
+    as it records its first pose at once.
+    """
     if a.exposure != "auto":
         return [None] if a.exposure == "keep" else a.exposure
+    if not a.auto:
+        say("rotstar-capture: exposure: point the camera at the playing screen, press Enter to look (q: quit)")
+        line = sys.stdin.readline()
+        if not line or line.strip().lower() == "q":
+            raise CaptureError("stopped before the exposure look: no pose written")
+        skip(src, a.settle)
     got = control(a, "exposure auto", choose_exposure, src, START_US, look_frames(holds, a.refresh, src.fps),
                   a.settle, SHORTEST_US, longest_exposure_us(src.fps))
     if got is False:  # --force: a camera whose exposure cannot be set

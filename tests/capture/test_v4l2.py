@@ -643,7 +643,7 @@ def test_capture_cli_auto_exposure_through_the_fake_d435(player_loop_frames, tmp
         return np.clip(loop[k % len(loop)].astype(float) * set_to[-1] / 4000, 0, 65535).astype("<u2")
 
     fake.frames = frames
-    monkeypatch.setattr(sys, "stdin", io.StringIO("\nq\n"))
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n\nq\n"))  # Enter: the look; Enter: pose000; q
     code = rotstar_capture(["--pattern", str(tmp_path), "--out", str(tmp_path / "seq"), "--size", "640x400",
                             "--hold", "18", "--frames", "360"], source=V4L2Source("/dev/video2", size=(640, 400),
                                                                                  fps=25, sys=fake))
@@ -652,10 +652,12 @@ def test_capture_cli_auto_exposure_through_the_fake_d435(player_loop_frames, tmp
     us = int(re.search(r"exposure: (\d+) us \(white at (\d+) % of full scale after 3 looks", err)[1])
     white_4000 = measure_look(loop.astype(float), 65535).white  # the fake's white at 4000 us
     assert abs(white_4000 * us / 4000 / 0.75 - 1) < 0.1
-    assert set_to[0] == 8000 and 2000 in set_to and set_to[-1] == us  # clipped at 8000: 4 times shorter, then
+    assert set_to[0] == 8500 and set_to.index(8000) < set_to.index(2000) and set_to[-1] == us  # the camera's
+    # default until the look sets 8000 us (clipped), then 4 times shorter, then the exposure picked
     assert out.split() == [str(tmp_path / "seq" / f"exp{us}us" / "pose000")]
     assert f"pose000 at {us} us: board complete (24/24)" in err
     assert json.loads((tmp_path / "seq" / "capture.json").read_text())["auto_exposure"]["looks"] == 3
+    assert err.index("press Enter to look") < err.index(f"exposure: {us} us (") < err.index("pose000: place the camera")
 
 
 def test_capture_cli_stops_when_a_control_fails(player_loop_frames, tmp_path, capsys, monkeypatch):
