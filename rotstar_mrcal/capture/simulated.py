@@ -32,7 +32,10 @@ from it:
   frame (a camera that is not still);
 - write_player_recording: a whole session as a replayable recording (.npy +
   .json), pose after pose with the camera moving in between: what
-  `rotstar-simulate --recording` writes.
+  `rotstar-simulate --recording` writes;
+- SimulatedCamera: the same stream live, one frame per read(), as a
+  FrameSource whose exposure is set as a device's (the light scales with
+  it): what rotstar-capture's exposure look is tested on.
 """
 
 from __future__ import annotations
