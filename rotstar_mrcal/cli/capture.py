@@ -513,7 +513,7 @@ def _exposures_to_record(a, src, holds, log: dict) -> list[int | None]:
 
 
 def _record_poses(a, src, datasets, pattern, layout, nframes: int, raw_dir: str, log: dict) -> None:
-    """(src streaming) Until --poses poses with a board (or the user's q, the recording's end): wait for a view, record it"""
+    """(src streaming) Until --poses poses with a board (or q, the recording's end): wait for a view, record it"""
     opts = SessionOptions(dataclasses.replace(options_from(a), hold=a.hold or 0, refresh_hz=a.refresh), a.keep_raw,
                           first_look(a, pattern, src.fps) if a.until_enough else 0)
     pose_no = next_free_pose([d.folder for d in datasets])
