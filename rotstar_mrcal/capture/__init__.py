@@ -29,6 +29,8 @@ Modules, one concept each:
     backend_replay     a recording (folder of frames, .npy, .raw, video)
     backends           open a backend by name
     motion             frame differences, stillness, affine drift
+    exposure           the exposure from a short look at the playing screen
+                       (the pattern's white at 75 % of full scale)
     segment            a recording of the looping player -> its frames
     rig                several cameras read in lockstep (RigSource, record_rig)
     rig_segment        every camera's recording split with the same frame
@@ -36,7 +38,8 @@ Modules, one concept each:
     rig_session        a pose of several cameras -> <pose>/camera-<k>/ folders
     pose               one pose: segmented frames -> dataset folder, quick check
     coverage           which parts of the imager the detected corners cover
-    simulated          simulated recordings of the player, for tests
+    simulated          simulated recordings of the player, and a simulated
+                       camera (SimulatedCamera) whose exposure can be set
 
 See doc/capture.md.
 """

@@ -32,7 +32,10 @@ from it:
   frame (a camera that is not still);
 - write_player_recording: a whole session as a replayable recording (.npy +
   .json), pose after pose with the camera moving in between: what
-  `rotstar-simulate --recording` writes.
+  `rotstar-simulate --recording` writes;
+- SimulatedCamera: the same stream live, one frame per read(), as a
+  FrameSource whose exposure is set as a device's (the light scales with
+  it): what rotstar-capture's exposure look is tested on.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ import os
 import cv2
 import numpy as np
 
+from rotstar_mrcal.capture.source import Frame, FrameSource
 from rotstar_mrcal.pattern.loop import entry_holds, player_loop
 from rotstar_mrcal.simulate.exposure import expose
 from rotstar_mrcal.simulate.irradiance import render_irradiance
@@ -323,3 +327,85 @@ def write_player_recording(path: str, layout, model, rts, *, hold: int | None, r
         os.remove(path)
         raise
     return total - len(lost)
+
+
+class SimulatedCamera(FrameSource):
+    """A camera filming the looping player live, one frame per read(), its exposure set as a device's is
+
+    E: (n_entries, H, W) irradiance of every loop entry (loop_irradiance), in
+    units of the screen's white; hold: refreshes per entry (entry_holds).
+    Each frame is camera_stream's, with the flaws of record_player, except
+    that the light scales with the exposure: a pixel of irradiance 1 reaches
+    full scale at full_scale_us (gain = exposure / full_scale_us; expose
+    clips at full scale and adds the noise as today). set_exposure_us takes
+    effect `latency` frames later (a D435 needs a few frames) and is limited
+    to [1 us, the frame period], as a camera limits it; the value it
+    returns is the one used. The camera stops (read() gives None, as a
+    replay's end) after `duration` seconds.
+
+    SYNOPSIS
+
+        >>> E = np.stack([np.zeros((8, 10)), np.ones((8, 10))])      # the marker, one white entry
+        >>> cam = SimulatedCamera(E, [6, 6], exposure_us=5000, full_scale_us=10000, noise=0, latency=0)
+        >>> cam.set_exposure_us(50000), cam.fps                 # at most the frame period at 25 fps
+        (40000.0, 25.0)
+        >>> cam.set_exposure_us(5000)
+        5000.0
+        >>> [int(cam.read().image.max()) for _ in range(6)]     # white at half scale; the marker black
+        [32768, 0, 0, 32768, 32768, 32768]
+        >>> cam.set_exposure_us(20000), max(int(cam.read().image.max()) for _ in range(3))   # twice the light: clipped
+        (20000.0, 65535)
+    """
+
+    name = "simulated"
+
+    def __init__(self, E: np.ndarray, hold, fps: float = 25.0, refresh_hz: float = 60.0, flaws: Flaws = Flaws(),
+                 exposure_us: float = 8000.0, full_scale_us: float = 13300.0, noise: float = 0.01, bits: int = 16,
+                 value_bits: int | None = None, latency: int = 2, duration: float = 120.0, start_entry: int = 0,
+                 start_phase: float = 0.0, seed=0):
+        self.E, self.fps, self.flaws = np.asarray(E), float(fps), flaws
+        self.full_scale_us, self.noise, self.bits, self.value_bits = full_scale_us, noise, bits, value_bits
+        self.full_scale = float((1 << bits) - 1)
+        self.latency, self.duration = int(latency), float(duration)
+        self.rng = np.random.default_rng(seed)
+        prev = (start_entry - 1) % len(self.E)  # as record_player: rows the panel reaches later see the entry before
+        self.sched = player_schedule(len(self.E), hold, refresh_hz=refresh_hz, duration=duration + 1.0,
+                                     start_entry=prev, start_phase=start_phase, late=flaws.late, early=flaws.early,
+                                     rng=self.rng)
+        self.ends = np.array([s.t1 for s in self.sched])
+        self.pwm = None if flaws.pwm is None else (flaws.pwm[0], flaws.pwm[1],
+                                                   float(self.rng.uniform(0, 1 / flaws.pwm[0])))
+        self.t0 = self.sched[0].t1 + start_phase * (self.sched[1].t1 - self.sched[1].t0)
+        self.i = 0  # the camera's frame counter (frames the driver loses included)
+        self.exposures = [(0, float(exposure_us))]  # (first frame, exposure) of every setting
+
+    def set_exposure_us(self, us: float) -> float:
+        us = float(min(max(us, 1.0), 1e6 / self.fps))
+        self.exposures.append((self.i + self.latency, us))
+        return us
+
+    def exposure_at(self, i: int) -> float:
+        """The exposure (us) frame i is taken with"""
+        return [e for k, e in self.exposures if k <= i][-1]
+
+    def read(self, timeout: float = 2.0) -> Frame | None:
+        while True:
+            i = self.i
+            a = self.t0 + i / (self.fps * (1 + self.flaws.clock_drift))
+            if a - self.t0 > self.duration:
+                return None
+            self.i += 1
+            if not (self.flaws.drop_rate and self.rng.uniform() < self.flaws.drop_rate):
+                break
+        exposure_s = self.exposure_at(i) * 1e-6
+        k = int(np.searchsorted(self.ends, a - self.flaws.scan_s - self.flaws.response_s))
+        near = [s for s in self.sched[max(0, k - 1):k + 8] if s.t0 < a + exposure_s]
+        img, _ = camera_stream(self.E, near, 1, fps=self.fps, exposure_s=exposure_s, scan_s=self.flaws.scan_s,
+                               t0=a, gain=exposure_s * 1e6 / self.full_scale_us, noise=self.noise, bits=self.bits,
+                               value_bits=self.value_bits, rng=self.rng, response_s=self.flaws.response_s,
+                               pwm=self.pwm)
+        return Frame(img[0], i, int(round(a * 1e9)))
+
+    def info(self) -> dict:
+        return {"backend": self.name, "fps": self.fps, "exposure_us": self.exposure_at(self.i),
+                "shape": list(self.E.shape[1:]), "flaws": dataclasses.asdict(self.flaws)}

@@ -18,6 +18,9 @@ import numpy as np
 
 from rotstar_mrcal import dataset
 from rotstar_mrcal.capture.backends import BACKENDS, describe_nodes, open_source
+from rotstar_mrcal.capture.exposure import (
+    SHORTEST_US, START_US, choose_exposure, longest_exposure_us, look_frames,
+)
 from rotstar_mrcal.capture.d435 import DEFAULT_FPS, DEFAULT_FOURCC, DEFAULT_SIZE, format_warning
 from rotstar_mrcal.capture.rig import RigSource
 from rotstar_mrcal.capture.rig_session import RigDataset, capture_rig_one
@@ -70,8 +73,14 @@ multi-camera layout of doc/dataset.md), with a coverage picture per camera.
 
 Several exposures (--exposure 2000,4000,8000) give one dataset each,
 OUT/exp2000us, OUT/exp4000us, ..., to calibrate and compare separately.
-Without --exposure the camera's exposure is left alone and OUT is the
-dataset.
+Without --exposure (or with --exposure auto) the capture first takes a
+short look at the playing screen (on Enter, or at once with --auto; a few
+camera frames at a time, about a second or two) and picks the exposure that puts the pattern's white at 75 %
+of full scale, unclipped, then records as if that exposure had been given
+(OUT/exp<us>us); a screen it cannot see or that is too dark even at the
+longest exposure stops it with the reason. --exposure keep leaves the
+camera's exposure alone and OUT is the dataset; a replay keeps the exposure
+it was recorded with.
 
 Messages go to stderr; stdout gets only the dataset folders written (and
 the device listing of --list).
@@ -81,21 +90,30 @@ EPILOG = """\
 examples:
   rotstar-capture --list                                   # first contact: nodes, formats, controls
   rotstar-capture --pattern pattern/ --out seq --exposure 2000,4000,8000
-  rotstar-capture --pattern pattern/ --out seq --auto --poses 30
+  rotstar-capture --pattern pattern/ --out seq --auto --poses 30       # exposure picked by a look
+  rotstar-capture --pattern pattern/ --out seq --exposure keep          # the camera's exposure as it is
   rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --frames 640   # Enter per pose
   rotstar-capture --backend replay --device rec.npy --pattern pattern/ --out seq --hold 18 --auto
   rotstar-capture --pattern pattern/ --out stereo --stereo --exposure 4000          # both IR imagers
   rotstar-capture --pattern pattern/ --out rig --stereo --rgb-device /dev/video4 --rgb-exposure 300
   rotstar-detect seq/exp4000us > corners.vnl
 
-""" + exit_status_help("done", failed="a camera that cannot be opened or set, or no pose written") + "\n"
+""" + exit_status_help("done", failed="a camera that cannot be opened or set, a screen the exposure look "
+                                        "cannot see or expose (--exposure auto), or no pose written") + "\n"
 
 
-def _exposures(s: str) -> list[int]:
+def _exposures(s: str) -> list[int] | str:
+    """--exposure: 'auto', 'keep', or microseconds, one dataset each
+
+    >>> _exposures("auto"), _exposures("2000,4000")
+    ('auto', [2000, 4000])
+    """
+    if s in ("auto", "keep"):
+        return s
     try:
         v = [int(round(float(x))) for x in s.split(",") if x.strip()]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{s!r}: expected microseconds, e.g. 2000,4000,8000") from None
+        raise argparse.ArgumentTypeError(f"{s!r}: expected auto, keep or microseconds, e.g. 2000,4000,8000") from None
     if not v or min(v) < 1:
         raise argparse.ArgumentTypeError(f"{s!r}: exposures must be positive microseconds")
     return v
@@ -110,8 +128,10 @@ def parse_args(argv=None):
     a = p.parse_args(argv)
     if not a.list and not a.snapshot and (not a.pattern or not a.out):
         p.error("--pattern and --out are needed (or --list, --snapshot)")
-    if a.backend == "replay" and a.exposure:
+    if a.backend == "replay" and a.exposure not in (None, "keep"):
         p.error("a replay has the exposure it was recorded with: drop --exposure")
+    if a.exposure is None:
+        a.exposure = "keep" if a.backend == "replay" else "auto"
     if (a.stereo or a.rgb_device) and a.backend != "v4l2":
         p.error("--stereo and --rgb-device record over V4L2 (--backend v4l2); split recordings of several cameras "
                 "with rotstar-segment")
@@ -143,8 +163,11 @@ def _camera_arguments(p) -> None:
     g.add_argument("--fourcc", default=DEFAULT_FOURCC.strip(), help="pixel format (default Y16)")
     g.add_argument("--size", type=size_arg, default=DEFAULT_SIZE, help="default 1280x800")
     g.add_argument("--fps", type=float, default=None, help=f"frame rate (default {DEFAULT_FPS:g}; replay: from the recording)")
-    g.add_argument("--exposure", type=_exposures, help="microseconds, one dataset each, e.g. 2000,4000,8000 "
-                                                       "(default: leave the camera's exposure alone)")
+    g.add_argument("--exposure", type=_exposures, metavar="auto|keep|US[,US...]",
+                   help="auto (the default): a short look at the playing screen picks one exposure (the pattern's "
+                        "white at 75 %% of full scale, unclipped) and OUT/exp<us>us gets the dataset; keep: leave the "
+                        "camera's exposure alone (OUT is the dataset; a replay's default); microseconds, one dataset "
+                        "each, e.g. 2000,4000,8000. --snapshot sets only given microseconds")
     g.add_argument("--gain", type=float, help="sensor gain (default 16 on a D435, the lowest; else unchanged)")
     g.add_argument("--emitter", choices=("off", "on", "keep"), default=None,
                    help="IR projector (default off on a D435, keep elsewhere)")
@@ -312,7 +335,7 @@ def snapshot(a, src: FrameSource, names: list[str]) -> int:
         control(a, f"emitter {emitter}", src.set_emitter, emitter == "on")
     if gain is not None:
         control(a, f"gain {gain:g}", src.set_gain, gain)
-    if a.exposure:
+    if isinstance(a.exposure, list):
         control(a, f"exposure {a.exposure[0]} us", src.set_exposure_us, a.exposure[0])
     src.start()
     skip(src, a.settle)
@@ -407,17 +430,19 @@ def _warn_formats(a) -> None:
 def _session(a, argv, src, pattern, layout, holds) -> int:
     """Pose after pose into one dataset per exposure, capture.json after each; the summary; the exit status"""
     rig = isinstance(src, RigSource)
-    exposures = a.exposure or [None]
-    folders = [os.path.join(a.out, f"exp{e}us") if e else a.out for e in exposures]
-    datasets = [RigDataset(f, e, src.cameras) if rig else OutputDataset(f, e) for f, e in zip(folders, exposures)]
     if rig:
         say(f"rotstar-capture: {src.cameras} cameras: " + ", ".join(
             f"camera-{k} {v}" for k, v in enumerate(camera_names(src))))
     raw_dir = os.path.join(a.out, "raw")
     interrupted = False
+    datasets = []
     log = {"format": "rotstar-capture/1", "started": time.strftime("%Y-%m-%d %H:%M:%S"), "argv": sys.argv[1:] if argv is None else list(argv)}
     try:
         nframes = _start(a, src, log, holds)
+        src.start()
+        exposures = _exposures_to_record(a, src, holds, log)
+        datasets += [RigDataset(f, e, src.cameras) if rig else OutputDataset(f, e) for f, e in zip(
+            [os.path.join(a.out, f"exp{e}us") if e else a.out for e in exposures], exposures)]
         _record_poses(a, src, datasets, pattern, layout, nframes, raw_dir, log)
     except CaptureError as e:
         say(f"rotstar-capture: {e}")
@@ -462,12 +487,36 @@ def _start(a, src, log: dict, holds) -> int:
     return nframes
 
 
+def _exposures_to_record(a, src, holds, log: dict) -> list[int | None]:
+    """--exposure's microseconds; auto: the one a look at the screen picks (said, logged); keep: [None]
+
+    Without --auto the look waits for Enter (the camera must face the playing screen); --auto looks at once,
+    as it records its first pose at once.
+    """
+    if a.exposure != "auto":
+        return [None] if a.exposure == "keep" else a.exposure
+    if not a.auto:
+        say("rotstar-capture: exposure: point the camera at the playing screen, press Enter to look (q: quit)")
+        line = sys.stdin.readline()
+        if not line or line.strip().lower() == "q":
+            raise CaptureError("stopped before the exposure look: no pose written")
+        skip(src, a.settle)
+    got = control(a, "exposure auto", choose_exposure, src, START_US, look_frames(holds, a.refresh, src.fps),
+                  a.settle, SHORTEST_US, longest_exposure_us(src.fps))
+    if got is False:  # --force: a camera whose exposure cannot be set
+        return [None]
+    log["auto_exposure"] = dataclasses.asdict(got)
+    if got.failure:
+        raise CaptureError(f"exposure auto: {got.failure}")
+    say(f"rotstar-capture: {got.summary()}")
+    return [int(got.exposure_us)]
+
+
 def _record_poses(a, src, datasets, pattern, layout, nframes: int, raw_dir: str, log: dict) -> None:
-    """Until --poses poses with a board (or the user's q, the recording's end): wait for a view, record it"""
+    """(src streaming) Until --poses poses with a board (or q, the recording's end): wait for a view, record it"""
     opts = SessionOptions(dataclasses.replace(options_from(a), hold=a.hold or 0, refresh_hz=a.refresh), a.keep_raw,
                           first_look(a, pattern, src.fps) if a.until_enough else 0)
     pose_no = next_free_pose([d.folder for d in datasets])
-    src.start()
     taken, tau = 0, None
     while not a.poses or taken < a.poses:
         pose = f"pose{pose_no:03d}"

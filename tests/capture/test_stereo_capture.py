@@ -210,7 +210,7 @@ def test_y8i_both_halves_and_labelled_rectified(tmp_path, capsys, monkeypatch):
     src = RigSource([V4L2Source("/dev/video2", fourcc="Y8I", size=(1280, 800), fps=30, sys=fake, stereo=True)])
     monkeypatch.setattr(sys, "stdin", io.StringIO("\nq\n"))
     code = rotstar_capture(["--pattern", str(tmp_path), "--out", str(tmp_path / "s"), "--stereo", "--stereo-format",
-                            "Y8I", "--frames", "5"], source=src)
+                            "Y8I", "--frames", "5", "--exposure", "keep"], source=src)
     err = capsys.readouterr().err
     assert "warning: Y8I frames are rectified" in err and "quick look" in err
     assert code == 1 and "pose000: not usable: the recording is too short: 5 frame(s)" in err and "(on camera-0, camera-1)" in err

@@ -621,6 +621,45 @@ def test_capture_cli_through_the_fake_d435(player_loop_frames, tmp_path, capsys,
     assert not fake.streaming and fake.fds == {}
 
 
+def test_capture_cli_auto_exposure_through_the_fake_d435(player_loop_frames, tmp_path, capsys, monkeypatch):
+    """No --exposure: the look sets the extension unit's exposure, the fake's brightness follows it (clipped at
+    8000 us, its start), and the pose is recorded at the exposure picked, into OUT/exp<us>us"""
+    import io
+    import json
+    import re
+    import sys
+
+    from rotstar_mrcal.capture.exposure import measure_look
+    from rotstar_mrcal.cli.capture import main as rotstar_capture
+
+    layout, loop = player_loop_frames
+    (tmp_path / "pattern.json").write_text(layout.to_json())
+    fake = FakeD435()
+    ir = fake.nodes["/dev/video2"]
+    set_to = []
+
+    def frames(k, w, h, code):
+        set_to.append(ir.xu[uvc_xu.D4XX.EXPOSURE][3])
+        return np.clip(loop[k % len(loop)].astype(float) * set_to[-1] / 4000, 0, 65535).astype("<u2")
+
+    fake.frames = frames
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n\nq\n"))  # Enter: the look; Enter: pose000; q
+    code = rotstar_capture(["--pattern", str(tmp_path), "--out", str(tmp_path / "seq"), "--size", "640x400",
+                            "--hold", "18", "--frames", "360"], source=V4L2Source("/dev/video2", size=(640, 400),
+                                                                                 fps=25, sys=fake))
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    us = int(re.search(r"exposure: (\d+) us \(white at (\d+) % of full scale after 3 looks", err)[1])
+    white_4000 = measure_look(loop.astype(float), 65535).white  # the fake's white at 4000 us
+    assert abs(white_4000 * us / 4000 / 0.75 - 1) < 0.1
+    assert set_to[0] == 8500 and set_to.index(8000) < set_to.index(2000) and set_to[-1] == us  # the camera's
+    # default until the look sets 8000 us (clipped), then 4 times shorter, then the exposure picked
+    assert out.split() == [str(tmp_path / "seq" / f"exp{us}us" / "pose000")]
+    assert f"pose000 at {us} us: board complete (24/24)" in err
+    assert json.loads((tmp_path / "seq" / "capture.json").read_text())["auto_exposure"]["looks"] == 3
+    assert err.index("press Enter to look") < err.index(f"exposure: {us} us (") < err.index("pose000: place the camera")
+
+
 def test_capture_cli_stops_when_a_control_fails(player_loop_frames, tmp_path, capsys, monkeypatch):
     import io
     import sys
