@@ -9,8 +9,8 @@ pose keeps its truth, so every board the tool writes is checked against it.
 
 from __future__ import annotations
 
-import io
 import dataclasses
+import io
 import math
 import os
 import re
