@@ -170,6 +170,13 @@ class _Drain(threading.Thread):
         return self.data.decode(errors="replace")
 
 
+def _dup_or_none(fd: int) -> int | None:
+    try:
+        return os.dup(fd)
+    except OSError:
+        return None
+
+
 def _run_here(fn, argv: list[str], cwd) -> subprocess.CompletedProcess:
     """What `sys.exit(tool())` does in a new process with captured pipes, done in this one"""
     saved = (sys.argv, sys.stdin, sys.stdout, sys.stderr, os.getcwd(), os.environ.get("PATH"))
@@ -177,7 +184,7 @@ def _run_here(fn, argv: list[str], cwd) -> subprocess.CompletedProcess:
     multiprocessing.forkserver.ensure_running()  # (as parallel does); they outlive the command in this process
     for f in (sys.stdout, sys.stderr):
         f.flush()
-    fds = [os.dup(k) for k in (0, 1, 2)]
+    fds = [_dup_or_none(k) for k in (0, 1, 2)]  # (a test run may start with one of them closed)
     (out_r, out_w), (err_r, err_w) = os.pipe(), os.pipe()
     out, err = _Drain(out_r), _Drain(err_r)
     null = os.open(os.devnull, os.O_RDONLY)
@@ -209,8 +216,11 @@ def _run_here(fn, argv: list[str], cwd) -> subprocess.CompletedProcess:
         os.chdir(saved[4])
         os.environ["PATH"] = saved[5]
         for k, fd in enumerate(fds):
-            os.dup2(fd, k)
-            os.close(fd)
+            if fd is None:
+                os.close(k)
+            else:
+                os.dup2(fd, k)
+                os.close(fd)
     return subprocess.CompletedProcess(argv, code or 0, out.text(), err.text())
 
 
