@@ -88,6 +88,19 @@ def d435_poses(model, layout) -> np.ndarray:
     return np.array(rts)
 
 
+SMALL_LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)
+"""The capture tests' screen: 6 x 4 corners on 800 x 600, the default sequence (20 loop entries)"""
+
+
+@pytest.fixture
+def pattern_dir(tmp_path):
+    """A pattern folder of SMALL_LAYOUT (pattern.json alone), as rotstar-capture --pattern reads it"""
+    d = tmp_path / "pattern"
+    d.mkdir()
+    (d / "pattern.json").write_text(SMALL_LAYOUT.to_json())
+    return d
+
+
 @pytest.fixture(scope="session")
 def d435_seq(tmp_path_factory) -> SimSeq:
     """Rendered once per run: under pytest-xdist (make test's -n 2) the first worker renders it into the
@@ -146,9 +159,9 @@ def _entry_point(tool: str):
 
 
 class _Drain(threading.Thread):
-    """Reads a pipe (as subprocess.run's capture_output does, so that no writer blocks on a full pipe) until
-    stop(): what was written by then, not an end of file that a process the command started (the forkserver of
-    its workers, which outlives the command here) would hold back"""
+    """Reads a pipe (as subprocess.run's capture_output does, so that no writer blocks on a full pipe); text()
+    gives what was written until then, not waiting for an end of file that a process the command started (the
+    forkserver of its workers, which outlives the command here) would hold back"""
 
     def __init__(self, fd: int):
         super().__init__(daemon=True)
@@ -196,13 +209,14 @@ def _run_here(fn, argv: list[str], cwd) -> subprocess.CompletedProcess:
     sys.stderr = open(2, "w", closefd=False, buffering=1)
     sys.argv = list(argv)
     os.environ["PATH"] = cli_env()["PATH"]
+    code = 1
     try:
         if cwd is not None:
             os.chdir(cwd)
         code = fn()
     except SystemExit as e:
         code = e.code
-    except BaseException:  # the interpreter prints it and exits 1
+    except Exception:  # the interpreter prints it and exits 1 (the test run's own Ctrl-C goes on up)
         traceback.print_exc()
         code = 1
     finally:
@@ -214,7 +228,10 @@ def _run_here(fn, argv: list[str], cwd) -> subprocess.CompletedProcess:
         sys.stderr.flush()
         sys.argv, sys.stdin, sys.stdout, sys.stderr = saved[:4]
         os.chdir(saved[4])
-        os.environ["PATH"] = saved[5]
+        if saved[5] is None:
+            os.environ.pop("PATH", None)
+        else:
+            os.environ["PATH"] = saved[5]
         for k, fd in enumerate(fds):
             if fd is None:
                 os.close(k)

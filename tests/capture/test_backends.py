@@ -14,6 +14,8 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import SMALL_LAYOUT
+
 from rotstar_mrcal import dataset as ds, simulate
 from rotstar_mrcal.capture.backend_libcamera import LibcameraSource
 from rotstar_mrcal.capture.backend_replay import ReplaySource, save_recording
@@ -25,7 +27,7 @@ from rotstar_mrcal.cli.capture import main as rotstar_capture
 from rotstar_mrcal.pattern.loop import player_loop
 from rotstar_mrcal.pattern.layout import make_layout
 
-LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)  # the default sequence: 8 + 10 identity frames + 1
+LAYOUT = SMALL_LAYOUT  # (the pattern_dir fixture's) the default sequence: 8 + 10 identity frames + 1
 N_ENTRIES = len(player_loop(LAYOUT.frames()))
 HOLD = 18  # 20 entries x 18 refreshes at 60 Hz = 6 s = exactly 150 frames at 25 fps: the stream repeats
 LOOP = 150
@@ -40,14 +42,6 @@ def loop_frames():
     sched = player_schedule(N_ENTRIES, hold=HOLD, refresh_hz=60, duration=12.5)
     frames, _ = camera_stream(E, sched, LOOP, fps=25, exposure_s=0.012, noise=0.01, t0=0.013, rng=7)
     return frames
-
-
-@pytest.fixture
-def pattern_dir(tmp_path):
-    d = tmp_path / "pattern"
-    d.mkdir()
-    (d / "pattern.json").write_text(LAYOUT.to_json())
-    return d
 
 
 # ---- replay ----------------------------------------------------------------------------------

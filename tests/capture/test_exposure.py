@@ -11,6 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import SMALL_LAYOUT
+
 from rotstar_mrcal import simulate
 from rotstar_mrcal.capture.exposure import (
     MEASURABLE, TARGET, TOLERANCE, choose_exposure, longest_exposure_us, look_frames, measure_look, next_exposure,
@@ -18,12 +20,11 @@ from rotstar_mrcal.capture.exposure import (
 from rotstar_mrcal.capture.simulated import ALL_FLAWS, Flaws, SimulatedCamera, loop_irradiance
 from rotstar_mrcal.cli.capture import main as rotstar_capture
 from rotstar_mrcal.cli.detect import main as rotstar_detect
-from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.pattern.loop import entry_holds, player_loop
 
 FS = 65535.0
 LONGEST = 38000.0
-LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)
+LAYOUT = SMALL_LAYOUT  # (the pattern_dir fixture's) the default sequence: 8 + 10 identity frames + 1
 HOLDS = entry_holds(player_loop(LAYOUT.frames()))  # the short holds: the star 9 refreshes, the rest 6
 FULL_SCALE_US = 13300.0  # SimulatedCamera's default: irradiance 1 at full scale
 
@@ -135,14 +136,6 @@ def test_a_black_screen_and_a_dim_one_fail_in_one_line(scene):
 
 
 # ---- rotstar-capture -----------------------------------------------------------------------------
-@pytest.fixture
-def pattern_dir(tmp_path):
-    d = tmp_path / "pattern"
-    d.mkdir()
-    (d / "pattern.json").write_text(LAYOUT.to_json())
-    return d
-
-
 def capture(argv, cam, capsys):
     code = rotstar_capture([str(a) for a in argv] + ["--hold", "short", "--camera", "generic"], source=cam)
     out, err = capsys.readouterr()
