@@ -170,10 +170,11 @@ class _Drain(threading.Thread):
 
     def run(self):
         while True:
-            ready, _, _ = select.select([self.fd], [], [], 0.05)
+            stopped = self.stopped  # read before the select: what was written before text() is read after it
+            ready, _, _ = select.select([self.fd], [], [], 0 if stopped else 0.05)
             chunk = os.read(self.fd, 1 << 16) if ready else b""
             self.data += chunk
-            if not chunk and (self.stopped or ready):
+            if not chunk and (stopped or ready):
                 break
         os.close(self.fd)
 

@@ -14,6 +14,7 @@ import threading
 import time
 from typing import NoReturn
 
+from rotstar_mrcal.cli import interrupted_while_starting
 from rotstar_mrcal.atomic import atomic_path, atomic_write  # noqa: F401  (re-exported: the commands write through these)
 
 
@@ -174,6 +175,8 @@ def run(prog: str, main_fn, argv=None) -> int:
         2
     """
     main_thread = threading.current_thread() is threading.main_thread()  # (signal handlers live there)
+    if main_thread and signal.getsignal(signal.SIGINT) is interrupted_while_starting:
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # started: KeyboardInterrupt, caught below
     old = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
     real_stdout, sys.stdout = sys.stdout, _NamedStdout(sys.stdout)
     try:

@@ -32,6 +32,7 @@ whole sequence).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 
 import cv2
@@ -87,9 +88,21 @@ def make_screen(frames: np.ndarray, layout: Layout, room: float = 0.02) -> Scree
 
 
 def exact_frames(layout: Layout, frames: list[dict] | None = None) -> np.ndarray:
-    """render_frame of every entry of layout.frames() (or of `frames`), float32"""
-    frames = layout.frames() if frames is None else frames
+    """render_frame of every entry of layout.frames() (or of `frames`), float32
+
+    The whole sequence of a layout is kept for the next call (read-only: copy it to change it); rendering it
+    takes 1-2 s for the default screen, and a run that writes several datasets asks for the same one again.
+    """
+    if frames is None:
+        return _whole_sequence(layout)
     return np.stack([render_frame(layout, f).astype(np.float32) for f in frames])
+
+
+@functools.lru_cache(maxsize=1)
+def _whole_sequence(layout: Layout) -> np.ndarray:
+    out = exact_frames(layout, layout.frames())
+    out.flags.writeable = False
+    return out
 
 
 def shown_light(frames: np.ndarray, gamma: float = 2.2, screen_gamma: float | None = None) -> np.ndarray:

@@ -17,7 +17,7 @@ def test_quick_check_labels_a_board_hanging_over_the_edge(tmp_path):
     model, layout = preset_model("pinhole-small"), make_layout(screen=(800, 600), pitch=100, band=24)
     rt = hanging_pose(model, layout, "top-right", 0, in_view=(0.5, 0.75))
     seq = str(tmp_path / "seq")
-    write_dataset(seq, layout, model, [rt], Settings(bits=16, seed=0))
+    write_dataset(seq, layout, model, [rt], Settings(bits=16, seed=0, supersample=2))  # (labels, 0.1 px)
     pattern, _ = dataset.read_pattern(seq)
     images = {f["file"]: dataset.read_image(f"{seq}/pose000/{f['file']}")[0].astype(np.float64)
               for f in pattern["frames"]}

@@ -37,7 +37,7 @@ def seq(tmp_path_factory) -> str:
     path = str(tmp_path_factory.mktemp("faults") / "seq")
     model = preset_model("pinhole-small")
     write_dataset(path, LAYOUT, model, random_poses(model, LAYOUT, 2, np.random.default_rng(1), max_tilt_deg=30),
-                  Settings(bits=16, seed=0))
+                  Settings(bits=16, seed=0, supersample=1))  # (read for labels and reasons only)
     return path
 
 
@@ -630,3 +630,21 @@ def test_synth_sigterm_stops_at_once_and_leaves_no_worker(tmp_path):
     time.sleep(0.2)
     assert not any(alive(x) for x in w)
     assert not os.path.exists(tmp_path / "o" / "summary.md")
+
+
+def test_ctrl_c_while_the_command_starts_is_one_line(tmp_path):
+    """A Ctrl-C that comes while a console script still imports its modules (numpy, OpenCV, mrcal): one line and
+    exit 130, not a KeyboardInterrupt traceback (rotstar_mrcal/cli/__init__.py). The Ctrl-C is sent by the
+    process to itself right after the cli package, where the real script would still be importing."""
+    script = ("import os, signal, sys; sys.argv[0] = os.path.join(os.getcwd(), 'rotstar-detect'); "
+              "import rotstar_mrcal.cli; os.kill(os.getpid(), signal.SIGINT); import rotstar_mrcal.cli.detect; "
+              "print('not interrupted')")
+    r = subprocess.run([os.path.join(VENV_BIN, "python"), "-c", script], capture_output=True, text=True,
+                       cwd=tmp_path, env=cli_env(), preexec_fn=ctrl_c_reaches_it, timeout=60)
+    assert r.returncode == 130 and r.stderr == "rotstar-detect: interrupted\n" and r.stdout == "", r
+    # once the command runs, Python's own handler is back: cli.common.run catches the KeyboardInterrupt
+    script = ("import os, signal, sys; sys.argv[0] = 'rotstar-x'; import rotstar_mrcal.cli.common as c; "
+              "sys.exit(c.run('rotstar-x', lambda argv: os.kill(os.getpid(), signal.SIGINT) or time.sleep(5)))")
+    r = subprocess.run([os.path.join(VENV_BIN, "python"), "-c", "import time; " + script], capture_output=True,
+                       text=True, cwd=tmp_path, env=cli_env(), preexec_fn=ctrl_c_reaches_it, timeout=60)
+    assert r.returncode == 130 and r.stderr.strip() == "rotstar-x: interrupted", r
