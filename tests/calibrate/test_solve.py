@@ -167,6 +167,7 @@ def test_detection_hint_is_not_repeated(calibrated):
     assert "next, calibrate with" not in r.stderr
 
 
+@pytest.mark.slow  # make test-slow: every mrcal-show tool drawn (8 gnuplot runs and a splined solve); tests/cli/test_terminal.py's report draws mrcal's figures in make test
 def test_mrcal_show_tools_draw_our_calibration(calibrated, tmp_path):
     """Every mrcal-show-* tool of doc/uncertainty.md, with --hardcopy, on models this project made"""
     from rotstar_mrcal.report.mrcalshow import draw, gnuplot_env, reads_png, show_commands
@@ -224,6 +225,7 @@ def test_a_board_mrcal_seeds_badly_is_solved_again(tmp_path):
     assert "[solved again seeded" in "\n".join(c.summary_lines())
 
 
+@pytest.mark.slow  # make test-slow: two more solves from other random starts; test_a_board_mrcal_seeds_badly_is_solved_again keeps the solve-again path in make test
 def test_rejections_that_depend_on_mrcals_random_start_are_undone(tmp_path):
     """mrcal starts the distortion terms at random: on this capture with hanging boards its first solve rejects
     0-17 good corners depending on that start (measured); calibrate() ends with none rejected, whatever the start"""

@@ -203,6 +203,7 @@ def test_simulated_display_offsets_cli(tmp_path, run_cli):
     assert r.returncode != 0 and "Traceback" not in r.stderr and "--display-offsets" in r.stderr
 
 
+@pytest.mark.slow  # make test-slow: two methods on 7 D435 poses; test_every_still_pose_detected_and_only_the_moved_one_rejected keeps the check in make test
 def test_crossval_detection_drops_the_moved_pose(offset_seq, tmp_path):
     """rotstar-crossval's detection of several methods applies the same dataset check"""
     from rotstar_mrcal.evaluate.detection import detect_dataset as detect_methods_dataset

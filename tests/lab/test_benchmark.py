@@ -143,6 +143,7 @@ def test_render_is_seeded_and_independent_of_processes(tiny):
     assert not np.array_equal(one[0].checker, one[1].checker)
 
 
+@pytest.mark.slow  # make test-slow: the benchmark's detect-and-calibrate driver, which make bench runs
 def test_detect_all_on_a_tiny_scene(tiny, tmp_path, restore_affinity):
     poses = scenes.render_all(tiny, 1)
     run = detection.detect_all(tiny, poses, str(tmp_path), measure_memory=False)
@@ -158,6 +159,7 @@ def test_detect_all_on_a_tiny_scene(tiny, tmp_path, restore_affinity):
     assert all("too few" in c["error"] for c in cal.values())  # 2 boards
 
 
+@pytest.mark.slow  # make test-slow: a benchmark render check, which make bench runs
 def test_identity_frames_leave_the_other_images_alone(tiny):
     """A layout without identity frames: the same 8 frames and checkerboards, no identity frames"""
     import dataclasses

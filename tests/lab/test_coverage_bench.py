@@ -129,6 +129,7 @@ def test_machinery_table_says_it_is_no_result(machinery):
     assert os.path.getsize(fn) > 10_000
 
 
+@pytest.mark.slow  # make test-slow: the coverage benchmark's driver, which make coverage-bench runs
 def test_doc_refused_for_the_machinery_check(tmp_path):
     doc = os.path.join(ROOT, "doc", "uncertainty.md")
     before = open(doc).read()

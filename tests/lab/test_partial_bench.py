@@ -48,6 +48,7 @@ def test_charuco_labels_on_whole_boards(layout):
 
 
 # ---- in view -------------------------------------------------------------------
+@pytest.mark.slow  # make test-slow: the partial-view benchmark's machinery, which make bench runs whole
 def test_true_windows_are_the_detectors():
     """The refinement windows from the true geometry against detect_pose's on whole boards: within 1.5 px"""
     from rotstar_mrcal.detect.pipeline import detect_pose
