@@ -75,7 +75,8 @@ from rotstar_mrcal.detect.display_offsets import (
 )
 from rotstar_mrcal.detect.edgespread import BLUR_FIELDS, blur_columns
 from rotstar_mrcal.detect.elements import by_graph, by_identity
-from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_each_frame, symmetric_refine
+from rotstar_mrcal.detect.refine import (PREFILTER_SIGMA, SYMMETRIC, Refiner, lowpass_for, prefilter,
+                                         refine_each_frame, symmetric_refine)
 from rotstar_mrcal.detect.response import pixel_noise
 from rotstar_mrcal.detect.sequence import check_band_parity
 
@@ -184,24 +185,8 @@ def per_frame_corners(frames: np.ndarray, corners: np.ndarray, window: np.ndarra
 
 
 MAX_SIGMA_RATIO = 3.0  # a corner's refinement residual over the board's median (whole views: <= 1.3)
-PREFILTER_SIGMA = 1.0  # px: the Gaussian low-pass before the symmetric refinement (module doc) ...
-PREFILTER_PER_WINDOW = 0.25  # ... at most this fraction of the pose's median half-window (small elements)
 
 
-def prefilter(frames: np.ndarray, sigma: float = PREFILTER_SIGMA) -> np.ndarray:
-    """The frames low-passed by a Gaussian of sigma px (edge pixels replicated); sigma 0: unchanged
-
-    SYNOPSIS
-
-        >>> f = np.zeros((1, 9, 9), np.float32); f[0, 4, 4] = 1
-        >>> g = prefilter(f, 1.0)
-        >>> round(float(g.sum()), 3), bool(g[0, 4, 4] == g.max()), g.dtype
-        (1.0, True, dtype('float32'))
-    """
-    frames = np.asarray(frames, np.float32)
-    if sigma <= 0:
-        return frames
-    return np.stack([cv2.GaussianBlur(f, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE) for f in frames])
 SHIFT_MIN_PX = 0.02  # display maps that move no corner by this much (camera px) are not modelled in the refinement
 
 
@@ -342,7 +327,7 @@ def detect_pose(
     motion = 0.0
     shifts = None
     if refine.needs == "rotstar":  # the paper's symmetric refinement, display maps and motion check
-        lowpass_sigma = min(prefilter_sigma, PREFILTER_PER_WINDOW * float(np.median(w)))
+        lowpass_sigma = lowpass_for(w, prefilter_sigma)
         lowpass = prefilter(frames, lowpass_sigma)
         res = symmetric_refine(lowpass, rough, w)
         if check_motion and res.ok.sum() >= 4:

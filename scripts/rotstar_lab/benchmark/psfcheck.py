@@ -42,6 +42,8 @@ from rotstar_mrcal import simulate
 from rotstar_mrcal.detect.blurmap import read_table
 from rotstar_mrcal.detect.edgespread import projected_moments, psf_estimate
 from rotstar_mrcal.detect.pipeline import detect_pose
+from rotstar_mrcal.detect.psfbias import (bias_correct, moment_kernel, moment_tensors, simulated_bias,
+                                         spread_nodes, star_normals)
 from rotstar_mrcal.optics.psf import LensPSF
 from rotstar_mrcal.optics.wavefront import Seidel
 from rotstar_mrcal.peers.checkerboard import refine_by_window, saddle_refine
@@ -88,6 +90,65 @@ def pose_dependent(pos, err):
         out += ((e - e.mean(axis=0)) ** 2).sum()
         dof += (len(e) - 1) * 2
     return float(np.sqrt(out / max(dof, 1) * 2))
+
+
+def grid_jacobian(corners: np.ndarray, pitch: float) -> np.ndarray:
+    """(ny, nx, 2, 2) camera px per display px from a corner grid (ny, nx, 2), by central differences"""
+    gx = np.gradient(corners, axis=1) / pitch
+    gy = np.gradient(corners, axis=0) / pitch
+    return np.stack((gx, gy), axis=-1)
+
+
+def true_kernels(psf, xy: np.ndarray, s: int = 4, quantum: float = 16.0) -> np.ndarray:
+    if len(xy) == 0:
+        return np.zeros((0, 1, 1))
+    """(N, k, k) the lens's kernels at points xy (N, 2) (positions rounded to `quantum` px), padded to one size"""
+    if not hasattr(psf, "_built"):
+        from rotstar_mrcal.optics.psf import gaussian_psf
+        return np.broadcast_to(gaussian_psf(float(psf), s), (len(xy),) + gaussian_psf(float(psf), s).shape).copy()
+    ks = [psf._built().kernel_at(*(np.round(p / quantum) * quantum), s) for p in xy]
+    m = max(k.shape[0] for k in ks)
+    out = np.zeros((len(ks), m, m))
+    for i, k in enumerate(ks):
+        a = (m - k.shape[0]) // 2
+        out[i, a:a + k.shape[0], a:a + k.shape[1]] = k / k.sum()
+    return out
+
+
+def simbias_nodes(pc, truth, psf, layout, s=2, nodes=9, degree=1) -> np.ndarray:
+    """simbias_true at `nodes` corners spread over the pose (s sub-pixels per px), a smooth field between"""
+    from rotstar_mrcal.detect.edgespread import smooth_field
+    q = pc.corners.copy()
+    j, i = np.nonzero(np.isfinite(q[..., 0]))
+    pick = spread_nodes(q[j, i], nodes)
+    J = grid_jacobian(truth, float(layout.pitch))[j, i][pick]
+    n = star_normals(J, np.array([layout.angle(k) for k in range(layout.nframes)]))
+    b = simulated_bias(true_kernels(psf, q[j, i][pick], s), s, n, q[j, i][pick], pc.window[j, i][pick], pc.prefilter_px)
+    ok = np.isfinite(b).all(axis=1)
+    q[j, i] -= smooth_field(q[j, i][pick][ok], b[ok], degree, at=q[j, i])
+    return q
+
+
+def simbias_true(pc, truth, psf, layout, reach=None) -> np.ndarray:
+    """(ny, nx, 2) the symmetric corners pc less the bias simulated with the TRUE local PSF and geometry
+
+    reach: instead of the true kernels, Gram-Charlier kernels of their moments clipped to +-reach
+    (px; 0: edgespread's reach for the corner's window)
+    """
+    q = pc.corners.copy()
+    j, i = np.nonzero(np.isfinite(q[..., 0]))
+    J = grid_jacobian(truth, float(layout.pitch))[j, i]
+    n = star_normals(J, np.array([layout.angle(k) for k in range(layout.nframes)]))
+    w = pc.window[j, i]
+    k = true_kernels(psf, q[j, i])
+    if reach is not None:
+        L = np.clip(0.45 * w, 2, 5) if reach == 0 else np.full(len(w), float(reach))
+        es = [projected_moments(kk, 4, np.arange(16) * np.pi / 16, r) for kk, r in zip(k, L)]
+        cov, kappa = (np.concatenate(v) for v in zip(*[moment_tensors(e) for e in es]))
+        k = moment_kernel(cov, kappa, 4)
+    b = simulated_bias(k, 4, n, q[j, i], w, pc.prefilter_px)
+    q[j, i] -= b
+    return q
 
 
 def cpu_time(frames, layout, fs, refine: str, repeats: int = 3) -> float:
@@ -183,6 +244,20 @@ def main(argv=None):
                 avg = averaged_captures(cb, expose, 8, lit_box(cb, 0.02))
                 q = refine_by_window(lambda im, x, w: saddle_refine(im, x, win=w), avg,
                                      perturbed_start(truth, a.seed, i), true_windows(model, layout, rt))
+            elif m.startswith("simbias-nodes"):  # simbias-nodes-S-N-D
+                S, NN, D = (int(v) for v in m.split("-")[2:5])
+                q = simbias_nodes(detect_pose(frames, layout, full_scale=fs), truth, psf, layout, S, NN, D)
+            elif m == "simbias-est":  # the estimated PSF, the true geometry and the raw frames
+                pc = detect_pose(frames, layout, full_scale=fs)
+                q = pc.corners.copy()
+                jj, ii = np.nonzero(np.isfinite(q[..., 0]))
+                q[jj, ii] = bias_correct(frames, q[jj, ii], pc.window[jj, ii],
+                                         grid_jacobian(truth, float(layout.pitch))[jj, ii],
+                                         np.array([layout.angle(k) for k in range(layout.nframes)]), pc.prefilter_px)
+            elif m == "simbias-true":
+                q = simbias_true(detect_pose(frames, layout, full_scale=fs), truth, psf, layout)
+            elif m.startswith("simbias-moments"):  # simbias-moments-L: clipped to L px (0: edgespread's reach)
+                q = simbias_true(detect_pose(frames, layout, full_scale=fs), truth, psf, layout, float(m.split("-")[2]))
             else:
                 q = detect_pose(frames, layout, full_scale=fs, refine=REFINERS[m]).corners
             dt = time.perf_counter() - t0

@@ -1,0 +1,334 @@
+"""Bias by simulation: the symmetric fit's offset from the light's centroid under a known local PSF (issue 24)
+
+SYNOPSIS
+
+    >>> import numpy as np
+    >>> from rotstar_mrcal.detect.psfbias import simulated_bias, star_normals
+    >>> from rotstar_mrcal.optics.psf import gaussian_psf
+    >>> n = star_normals(np.eye(2)[None], np.arange(8) * np.pi / 16)
+    >>> b = simulated_bias(gaussian_psf(1.0, 4)[None], 4, n, np.array([[10.3, 20.6]]), np.array([8.0]), 1.0)
+    >>> bool(np.abs(b).max() < 0.005)          # a symmetric PSF: no bias
+    True
+
+Under a PSF that is not point-symmetric (coma) the symmetric fit (refine.py,
+Eq. 1, on frames low-passed by pipeline.prefilter) finds the blurred star's
+point of symmetry, not where the light's centroid lands. That offset is a
+deterministic function of the local PSF, of the local pattern (the two edge
+directions of every frame in the image, i.e. the element's Jacobian and the
+frames' angles), of the fit window and of the low-pass; it barely depends on
+the corner's sub-pixel phase. So render the ideal local star through the PSF
+with its centre at a known point (`render_star`: the sharp pattern sampled
+with a linear ramp on a sub-pixel grid, convolved with the PSF kernel,
+averaged over each pixel), run the SAME fit on it and read the bias
+(`simulated_bias`); the corner is then the fit's corner less that bias.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from scipy.signal import fftconvolve
+
+from rotstar_mrcal.detect.edgespread import (BIN_PX, MAX_REACH, MIN_REACH, REACH_PER_WINDOW, edge_spread, local_psf,
+                                             smooth_field)
+from rotstar_mrcal.detect.refine import lowpass_for, prefilter, symmetric_refine
+from rotstar_mrcal.optics.psf import Optics, wavefront_psf
+from rotstar_mrcal.optics.wavefront import Seidel
+
+PAD_PX = 2  # px beyond the window and the low-pass's reach in every rendered patch
+
+
+def star_normals(jac: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """(N, K, 2, 2) unit image normals of frame k's two lines at each corner
+
+    jac (N, 2, 2): camera px per display px at the corner; angles (K,): the
+    frames' rotations (Layout.angle), the lines along angle and angle + pi/2.
+
+    >>> np.round(star_normals(np.eye(2)[None], np.array([0.0]))[0, 0], 3)
+    array([[-0.,  1.],
+           [-1.,  0.]])
+    """
+    a = np.asarray(angles, float)
+    t = np.stack((np.stack((np.cos(a), np.sin(a)), -1), np.stack((-np.sin(a), np.cos(a)), -1)), 1)  # (K, 2, 2)
+    d = np.einsum("nij,klj->nkli", np.asarray(jac, float), t)
+    n = np.stack((-d[..., 1], d[..., 0]), -1)
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def render_star(kernels: np.ndarray, s: int, normals: np.ndarray, frac: np.ndarray, half: int) -> np.ndarray:
+    """(N, K, 2 half + 1, 2 half + 1) pixels of the local star through each corner's PSF
+
+    kernels (N, kh, kw): the PSFs at s sub-pixels per px (odd sizes, centred,
+    sum 1); normals (N, K, 2, 2) from star_normals; frac (N, 2): the corner's
+    position from the patch's centre pixel (its light lands there when the
+    kernel is centred). Values in [-1, 1] (the pattern's two colours).
+    """
+    N, K = normals.shape[:2]
+    kh, kw = kernels.shape[1:]
+    P = 2 * half + 1
+
+    def grid(n, m, f):  # sub-pixel centres, corner-relative, with m extra taps on each side
+        return -half - 0.5 + (np.arange(-m, P * s + m) + 0.5) / s - f[:, None]
+
+    xs, ys = grid(P, kw // 2, frac[:, 0]), grid(P, kh // 2, frac[:, 1])  # (N, Ws), (N, Hs)
+    ramp = (np.abs(normals).sum(-1) / s)[..., None, None]  # (N, K, 2, 1, 1): a sub-pixel's extent along n
+    dist = (normals[..., 0, None, None] * xs[:, None, None, None, :] +
+            normals[..., 1, None, None] * ys[:, None, None, :, None])  # (N, K, 2, Hs, Ws)
+    sharp = np.clip(2 * dist / ramp, -1, 1).prod(axis=2)
+    blurred = fftconvolve(sharp, kernels[:, None], mode="valid", axes=(-2, -1))  # (N, K, P s, P s)
+    return blurred.reshape(N, K, P, s, P, s).mean(axis=(3, 5))
+
+
+def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, chunk: int = 32) -> np.ndarray:
+    """(N, 2) the symmetric fit's corner less the PSF's centre, on the local star rendered through each kernel
+
+    corners (N, 2): where the real corners are (their sub-pixel phase is
+    kept); windows (N,): the fit's half-windows; lowpass_sigma: the Gaussian
+    the frames are low-passed by before the fit (pipeline.prefilter). The
+    patches are tiled into one image per frame and fitted as a pose is: the
+    same offsets, damping and stopping rule. NaN where the fit fails.
+    """
+    q = np.asarray(corners, float)
+    w = np.asarray(windows, float)
+    N = len(q)
+    out = np.full((N, 2), np.nan)
+    if not N:
+        return out
+    half = int(np.ceil(w.max())) + int(math.ceil(4 * lowpass_sigma)) + PAD_PX
+    P = 2 * half + 1
+    frac = q - np.round(q)
+    for a in range(0, N, chunk):
+        sl = slice(a, min(a + chunk, N))
+        patches = render_star(kernels[sl], s, normals[sl], frac[sl], half)
+        n, K = patches.shape[:2]
+        cols = int(math.ceil(math.sqrt(n)))
+        rows = int(math.ceil(n / cols))
+        mosaic = np.zeros((K, rows * P, cols * P), np.float32)
+        r, c = np.divmod(np.arange(n), cols)
+        for i in range(n):
+            mosaic[:, r[i] * P:(r[i] + 1) * P, c[i] * P:(c[i] + 1) * P] = patches[i]
+        at = np.stack((c * P + half + frac[sl, 0], r * P + half + frac[sl, 1]), -1)
+        fit = symmetric_refine(prefilter(mosaic, lowpass_sigma), at, w[sl])
+        out[sl] = fit.corners - at
+    return out
+
+
+def moment_tensors(es) -> tuple[np.ndarray, np.ndarray]:
+    """(cov (N, 2, 2), kappa (N, 4)) of the PSF from its projections' moments (edgespread.EdgeSpread)
+
+    var(phi) = s0 + s2c cos 2phi + s2s sin 2phi gives the covariance;
+    third(phi) = A cos phi + B sin phi + C cos 3phi + D sin 3phi the third
+    cumulant tensor kappa = (k_xxx, k_xxy, k_xyy, k_yyy), from
+    third(phi) = k_xxx c^3 + 3 k_xxy c^2 s + 3 k_xyy c s^2 + k_yyy s^3.
+    NaN rows where too few edges were measured.
+
+    >>> from rotstar_mrcal.detect.edgespread import projected_moments
+    >>> from rotstar_mrcal.optics.psf import gaussian_psf
+    >>> cov, kappa = moment_tensors(projected_moments(gaussian_psf(1.0, 4), 4, np.arange(16) * np.pi / 16, 6.0))
+    >>> np.round(cov, 2).tolist(), bool(np.abs(kappa).max() < 1e-6)
+    ([[[1.0, 0.0], [0.0, 1.0]]], True)
+    """
+    phi = es.normal
+    c1, s1 = np.cos(phi), np.sin(phi)
+    v = _harmonic(es.var, np.stack((np.ones_like(phi), np.cos(2 * phi), np.sin(2 * phi)), -1))
+    t = _harmonic(es.third, np.stack((c1, s1, np.cos(3 * phi), np.sin(3 * phi)), -1))
+    cov = np.stack((np.stack((v[:, 0] + v[:, 1], v[:, 2]), -1), np.stack((v[:, 2], v[:, 0] - v[:, 1]), -1)), -2)
+    A, B, C, D = t.T
+    kappa = np.stack((A + C, B / 3 + D, A / 3 - C, B - D), -1)
+    return cov, kappa
+
+
+def _harmonic(y, cols):
+    """Least-squares coefficients per row of y (N, E) on cols (N, E, p), NaNs left out (NaN: too few)"""
+    ok = np.isfinite(y) & np.isfinite(cols).all(-1)
+    A = np.where(ok[..., None], cols, 0.0)
+    AtA = np.einsum("nep,neq->npq", A, A)
+    enough = ok.sum(-1) > cols.shape[-1] + 1
+    AtA[~enough] = np.eye(cols.shape[-1])
+    coef = np.linalg.solve(AtA, np.einsum("nep,ne->np", A, np.where(ok, y, 0.0))[..., None])[..., 0]
+    coef[~enough] = np.nan
+    return coef
+
+
+def moment_kernel(cov: np.ndarray, kappa: np.ndarray, s: int, radius: float | None = None) -> np.ndarray:
+    """(N, k, k) kernels at s taps per px with covariance cov (N, 2, 2) and third cumulants kappa (N, 4)
+
+    A Gaussian times 1 + kappa . H3 / 6 (the Gram-Charlier series to third
+    order: mean 0, the covariance and third cumulants given; it may dip
+    below 0 where the skew is strong), sum 1. radius: px (default 5 sigma
+    of the widest).
+
+    >>> k = moment_kernel(np.eye(2)[None] * 1.0, np.array([[0.5, 0.0, 0.0, 0.0]]), 4)
+    >>> x = (np.arange(k.shape[2]) - k.shape[2] // 2) / 4
+    >>> round(float((k[0].sum(0) * x).sum()), 3) + 0.0, round(float((k[0].sum(0) * x ** 3).sum()), 2)
+    (0.0, 0.5)
+    """
+    cov = np.asarray(cov, float)
+    kappa = np.asarray(kappa, float)
+    if radius is None:
+        radius = 5 * float(np.sqrt(np.linalg.eigvalsh(cov)[:, -1].max()))
+    m = int(np.ceil(radius * s))
+    t = np.arange(-m, m + 1) / s
+    x = np.stack(np.broadcast_arrays(t[None, :], t[:, None]), -1)  # (k, k, 2) (x, y)
+    P = np.linalg.inv(cov)  # (N, 2, 2)
+    y = np.einsum("nij,abj->nabi", P, x)  # Sigma^-1 x
+    g = np.exp(-0.5 * np.einsum("nabi,abi->nab", y, x))
+    kxxx, kxxy, kxyy, kyyy = (kappa[:, i, None, None] for i in range(4))
+    y0, y1 = y[..., 0], y[..., 1]
+    p00, p01, p11 = (P[:, i, j, None, None] for i, j in ((0, 0), (0, 1), (1, 1)))
+    h = (kxxx * (y0 ** 3 - 3 * y0 * p00) + 3 * kxxy * (y0 * y0 * y1 - y1 * p00 - 2 * y0 * p01)
+         + 3 * kxyy * (y0 * y1 * y1 - y0 * p11 - 2 * y1 * p01) + kyyy * (y1 ** 3 - 3 * y1 * p11))
+    k = g * (1 + h / 6)
+    return k / k.sum(axis=(1, 2), keepdims=True)
+
+
+# ---------------------------------------------------------------------------
+# the local PSF from the edges' moments: a Seidel wavefront (coma, focus) per region
+# ---------------------------------------------------------------------------
+KERNEL_STEP = 0.1  # waves: the local coma and focus are rounded to this for the kernels that are rendered
+SUPERSAMPLE = 4
+
+
+def seidel_kernel(coma: float, focus: float, angle: float, optics=None, s: int = SUPERSAMPLE) -> np.ndarray:
+    """The wavefront PSF of coma (waves, its tail along `angle`) and focus, its centroid put back by tilt = -coma
+
+    As the simulator's lens (optics.psf.LensPSF); cached on the values rounded to KERNEL_STEP and 1 degree.
+    """
+    r = KERNEL_STEP
+    return _seidel_kernel(round(coma / r) * r, round(focus / r) * r, round(math.degrees(angle)) % 360,
+                          optics or Optics(), s)
+
+
+@functools.lru_cache(maxsize=512)
+def _seidel_kernel(coma, focus, angle_deg, optics, s):
+    a = math.radians(angle_deg)
+    return wavefront_psf(Seidel(tilt=-coma, coma=coma, focus=focus, tilt_angle=a, coma_angle=a), optics, s)
+
+
+TABLE_COMA = np.arange(0.0, 4.01, 0.25)  # waves of local coma in the table of measured third moments
+
+
+@functools.lru_cache(maxsize=64)
+def coma_table(reach: float, optics) -> np.ndarray:
+    """(len(TABLE_COMA),) the third moment edgespread measures (A, px^3) on the local star through each coma
+
+    The star (square pixels, window reach / REACH_PER_WINDOW) rendered
+    through seidel_kernel(coma, 0, 0) and read by local_psf with this
+    reach, as the real corners are: the table carries what the ESF reading
+    does to the moments (the tail beyond the reach, the levels it is
+    normalised by, the pixel box).
+    """
+    normals = star_normals(np.eye(2)[None].repeat(len(TABLE_COMA), 0), np.arange(8) * np.pi / 16)
+    ks = [seidel_kernel(c, 0.0, 0.0, optics) for c in TABLE_COMA]
+    w = reach / REACH_PER_WINDOW
+    half = int(np.ceil(w)) + 2
+    frames = render_star(_padded(ks), SUPERSAMPLE, normals, np.zeros((len(ks), 2)), half)
+    out = np.empty(len(ks))
+    for i, f in enumerate(frames):  # (8, P, P), the corner at the centre pixel
+        e = local_psf(f, np.array([[half, half]], float), w, reach=reach)[1]
+        out[i] = e.coma[0] * np.cos(e.coma_angle[0])
+    out[0] = 0.0
+    return np.maximum.accumulate(out)
+
+
+def local_coma(third: np.ndarray, reach: float, optics=None) -> np.ndarray:
+    """(N,) waves of coma (focus 0) whose measured third moment at this reach is third (N,) (coma_table)
+
+    >>> t = coma_table(2.0, Optics())
+    >>> np.round(local_coma(t[[2, 6]], 2.0), 2).tolist()
+    [0.5, 1.5]
+    """
+    t = coma_table(round(float(reach) / BIN_PX) * BIN_PX, optics or Optics())
+    return np.interp(np.asarray(third, float), t + np.arange(len(t)) * 1e-9, TABLE_COMA)
+
+
+def _padded(ks) -> np.ndarray:
+    """(n, m, m) the odd square kernels ks centred in one size"""
+    m = max(k.shape[0] for k in ks)
+    out = np.zeros((len(ks), m, m))
+    for i, k in enumerate(ks):
+        p = (m - k.shape[0]) // 2
+        out[i, p:p + k.shape[0], p:p + k.shape[1]] = k
+    return out
+
+
+def spread_nodes(xy: np.ndarray, n: int) -> np.ndarray:
+    """Indices of n of the points xy (N, 2) spread over them: farthest-point sampling from the most central
+
+    >>> spread_nodes(np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0], [10.0, 0.0]]), 3).tolist()
+    [2, 0, 3]
+    """
+    xy = np.asarray(xy, float)
+    pick = [int(np.argmin(np.linalg.norm(xy - xy.mean(axis=0), axis=1)))]
+    d = np.linalg.norm(xy - xy[pick[0]], axis=1)
+    while len(pick) < min(n, len(xy)):
+        pick.append(int(np.argmax(d)))
+        d = np.minimum(d, np.linalg.norm(xy - xy[pick[-1]], axis=1))
+    return np.array(pick, int)
+
+
+NODES = 16  # corners per pose where the bias is simulated; a smooth field carries it to the others
+DEGREE = 2  # of that field
+COMA_DEGREE = 1  # of the field the corners' coma vectors are pooled by
+
+
+def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lowpass_sigma: float | None = None,
+                 nodes: int = NODES, degree: int = DEGREE, optics=None, min_window: float = 4.0) -> np.ndarray:
+    """(N, 2) the symmetric fit's corners (N, 2) less their simulated bias: the light's centroid
+
+    frames (K, H, W) the raw rotating-star frames the corners were fitted on
+    (low-passed by lowpass_sigma first; None: refine.lowpass_sigma of the
+    windows, as detect_pose), window (N,) the fit's half-windows, shifts
+    (K, N, 2) display offsets or None. The local pattern: jac (N, 2, 2)
+    camera px per display px with angles (K,) the frames' rotations, or
+    (None) each frame's two edge normals as edgespread measures them at the
+    nodes. The local PSF:
+    each corner's edge-spread third moment (edgespread.local_psf, one reach
+    for the pose) is turned into waves of Seidel coma (local_coma, focus 0)
+    along its measured direction, these vectors are pooled over the pose by
+    a plane (COMA_DEGREE) and read at `nodes` corners spread over the pose;
+    the bias of the
+    same fit on the local star through that PSF (simulated_bias) is carried
+    to every corner by a smooth field. Fewer than 2 x the field's terms of
+    measured corners: the corners are returned unchanged.
+    """
+    q = np.asarray(corners, float).reshape(-1, 2)
+    w = np.broadcast_to(np.asarray(window, float), (len(q),))
+    fin = np.isfinite(q).all(axis=1) & np.isfinite(w)
+    meas = fin & (w >= min_window)
+    nterm = (degree + 1) * (degree + 2) // 2
+    if meas.sum() < 2 * nterm:
+        return q.copy()
+    L = float(np.floor(np.clip(REACH_PER_WINDOW * np.median(w[meas]), MIN_REACH, MAX_REACH) / BIN_PX) * BIN_PX)
+    meas &= REACH_PER_WINDOW * w >= L - 1e-9
+    sh = None if shifts is None else np.asarray(shifts, float)[:, meas]
+    _, est = local_psf(frames, q[meas], w[meas], sh, reach=L)
+    good = np.isfinite(est.width) & np.isfinite(est.coma) & (est.edges >= 2 * (1 if np.ndim(frames) == 2 else
+                                                                                  len(frames)) - 2)
+    if good.sum() < 2 * nterm:
+        return q.copy()
+    idx = np.flatnonzero(fin)
+    nd = idx[spread_nodes(q[idx], nodes)]
+    # each corner's coma (waves) from its third moment, as a vector along its tail: linear over the image
+    # for a centred lens (Seidel coma grows with the field radius), so pooled by a plane
+    cw = local_coma(est.coma[good], L, optics)
+    vec = cw[:, None] * np.stack((np.cos(est.coma_angle[good]), np.sin(est.coma_angle[good])), -1)
+    cv = smooth_field(q[meas][good], vec, COMA_DEGREE, at=q[nd])
+    c, a = np.hypot(cv[:, 0], cv[:, 1]), np.arctan2(cv[:, 1], cv[:, 0])
+    kern = _padded([seidel_kernel(ci, 0.0, ai, optics) for ci, ai in zip(c, a)])
+    if jac is not None:
+        normals = star_normals(np.asarray(jac, float)[nd], angles)
+    else:
+        K = 1 if np.ndim(frames) == 2 else len(frames)
+        ang = edge_spread(frames, q[nd], w[nd], None if shifts is None else np.asarray(shifts)[:, nd],
+                          reach=MIN_REACH).normal.reshape(len(nd), K, 2)
+        normals = np.stack((np.cos(ang), np.sin(ang)), -1)
+    sigma = lowpass_for(w[fin]) if lowpass_sigma is None else lowpass_sigma
+    b = simulated_bias(kern, SUPERSAMPLE, normals, q[nd], w[nd], sigma)
+    ok = np.isfinite(b).all(axis=1)
+    out = q.copy()
+    if ok.sum() >= 2 * nterm:
+        out[idx] -= smooth_field(q[nd][ok], b[ok], degree, at=q[idx])
+    return out
