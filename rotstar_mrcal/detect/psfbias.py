@@ -244,6 +244,12 @@ def local_coma(third: np.ndarray, reach: float, optics=None) -> np.ndarray:
     return np.interp(np.asarray(third, float), t + np.arange(len(t)) * 1e-9, TABLE_COMA)
 
 
+def _turned(v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """vectors v (N, ..., 2) turned by angles a (N,) (radians, from x toward y)"""
+    c, s = (f(a).reshape((-1,) + (1,) * (v.ndim - 2)) for f in (np.cos, np.sin))
+    return np.stack((c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]), -1)
+
+
 def _padded(ks) -> np.ndarray:
     """(n, m, m) the odd square kernels ks centred in one size"""
     m = max(k.shape[0] for k in ks)
@@ -252,6 +258,35 @@ def _padded(ks) -> np.ndarray:
         p = (m - k.shape[0]) // 2
         out[i, p:p + k.shape[0], p:p + k.shape[1]] = k
     return out
+
+
+def plane_with_sd(xy: np.ndarray, v: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(values (M, 2), sd (M,)) of the least-squares plane through v (N, 2) at points xy (N, 2), read at (M, 2)
+
+    sd: the standard deviation of each component at `at`, from the scatter
+    about the plane (refitted once without the points beyond 3 robust sigmas).
+
+    >>> xy = np.array([[0.0, 0.0], [10, 0], [0, 10], [10, 10], [5, 5]])
+    >>> v, sd = plane_with_sd(xy, np.stack((xy[:, 0] * 0.1, np.ones(5)), -1), np.array([[20.0, 0.0]]))
+    >>> np.round(v, 3).tolist(), bool(sd[0] < 1e-9)
+    ([[2.0, 1.0]], True)
+    """
+    c = xy.mean(axis=0)
+    sc = np.maximum(np.ptp(xy, axis=0) / 2, 1e-9)
+
+    def design(p):
+        return np.column_stack((np.ones(len(p)), (p - c) / sc))
+
+    A, B = design(xy), design(at)
+    keep = np.ones(len(v), bool)
+    for _ in range(2):
+        coef = np.linalg.lstsq(A[keep], v[keep], rcond=None)[0]
+        r = np.linalg.norm(v - A @ coef, axis=1)
+        keep = r <= 3 * 1.4826 * np.median(r[keep]) + 1e-12
+    n = int(keep.sum())
+    s2 = (r[keep] ** 2).sum() / max(2 * (n - 3), 1)
+    lev = np.einsum("mi,ij,mj->m", B, np.linalg.pinv(A[keep].T @ A[keep]), B)
+    return B @ coef, np.sqrt(s2 * lev)
 
 
 def spread_nodes(xy: np.ndarray, n: int) -> np.ndarray:
@@ -271,7 +306,7 @@ def spread_nodes(xy: np.ndarray, n: int) -> np.ndarray:
 
 NODES = 16  # corners per pose where the bias is simulated; a smooth field carries it to the others
 DEGREE = 2  # of that field
-COMA_DEGREE = 1  # of the field the corners' coma vectors are pooled by
+COMA_SIGNIFICANCE = 3.0  # a pooled coma below this many standard deviations of its plane is taken as 0
 
 
 def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lowpass_sigma: float | None = None,
@@ -288,7 +323,8 @@ def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lo
     each corner's edge-spread third moment (edgespread.local_psf, one reach
     for the pose) is turned into waves of Seidel coma (local_coma, focus 0)
     along its measured direction, these vectors are pooled over the pose by
-    a plane (COMA_DEGREE) and read at `nodes` corners spread over the pose;
+    a plane and read at `nodes` corners spread over the pose (0 where it is
+    below COMA_SIGNIFICANCE of the plane's standard deviation there);
     the bias of the
     same fit on the local star through that PSF (simulated_bias) is carried
     to every corner by a smooth field. Fewer than 2 x the field's terms of
@@ -315,9 +351,9 @@ def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lo
     # for a centred lens (Seidel coma grows with the field radius), so pooled by a plane
     cw = local_coma(est.coma[good], L, optics)
     vec = cw[:, None] * np.stack((np.cos(est.coma_angle[good]), np.sin(est.coma_angle[good])), -1)
-    cv = smooth_field(q[meas][good], vec, COMA_DEGREE, at=q[nd])
+    cv, sd = plane_with_sd(q[meas][good], vec, q[nd])
     c, a = np.hypot(cv[:, 0], cv[:, 1]), np.arctan2(cv[:, 1], cv[:, 0])
-    kern = _padded([seidel_kernel(ci, 0.0, ai, optics) for ci, ai in zip(c, a)])
+    c = np.where(c > COMA_SIGNIFICANCE * sd, c, 0.0)  # a coma the edges do not show (symmetric PSF): none
     if jac is not None:
         normals = star_normals(np.asarray(jac, float)[nd], angles)
     else:
@@ -326,7 +362,9 @@ def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lo
                           reach=MIN_REACH).normal.reshape(len(nd), K, 2)
         normals = np.stack((np.cos(ang), np.sin(ang)), -1)
     sigma = lowpass_for(w[fin]) if lowpass_sigma is None else lowpass_sigma
-    b = simulated_bias(kern, SUPERSAMPLE, normals, q[nd], w[nd], sigma)
+    # the coma's direction turned into the pattern's: the kernel of each coma is computed once, tail along +x
+    kern = _padded([seidel_kernel(ci, 0.0, 0.0, optics) for ci in c])
+    b = _turned(simulated_bias(kern, SUPERSAMPLE, _turned(normals, -a), q[nd], w[nd], sigma), a)
     ok = np.isfinite(b).all(axis=1)
     out = q.copy()
     if ok.sum() >= 2 * nterm:

@@ -206,7 +206,7 @@ def main(argv=None):
     p.add_argument("--distance", default="", help="near,far metres (default: random_poses' range)")
     p.add_argument("--check-blur-map", metavar="CSV", help="compare a blur map with the lens's true PSFs")
     p.add_argument("--timing", action="store_true",
-                   help="also the CPU time of detect_pose per pose, symmetric and psf (the least of 3 runs each)")
+                   help="also the CPU time of detect_pose per pose, symmetric, psf and psf-sim (the least of 3 runs each)")
     a = p.parse_args(argv)
     if a.check_blur_map:
         return check_blur_map(a.check_blur_map, a.coma, a.focus)
@@ -237,7 +237,7 @@ def main(argv=None):
         frames = expose(rot).astype(np.float32)
         if a.timing:
             print(f"pose {i}: CPU s per detection " + ", ".join(
-                f"{m} {cpu_time(frames, layout, fs, m):.2f}" for m in ("symmetric", "psf")))
+                f"{m} {cpu_time(frames, layout, fs, m):.2f}" for m in ("symmetric", "psf", "psf-sim")))
         for m in methods:
             t0 = time.perf_counter()
             if m == "saddle":
