@@ -2,7 +2,8 @@
 
 import numpy as np
 
-from rotstar_mrcal.detect.psfbias import bias_correct, render_star, seidel_kernel, simulated_bias, star_normals
+from rotstar_mrcal.detect.psfbias import (bias_correct, render_star, render_star_fft, seidel_kernel, simulated_bias,
+                                         star_normals)
 from rotstar_mrcal.detect.refine import lowpass_for, prefilter, symmetric_refine
 from rotstar_mrcal.optics.psf import centroid_px, gaussian_psf
 
@@ -10,10 +11,10 @@ ANGLES = np.arange(8) * np.pi / 16
 
 
 def star_mosaic(kernel, jac, n=4, half=14, s=4, seed=0):
-    """(frames (8, H, W) of n x n local stars through kernel, their centres (n*n, 2)) at random sub-pixel phases"""
+    """(frames (8, H, W) of n x n local stars through kernel (by FFT), their centres (n*n, 2)), random sub-pixel phases"""
     frac = np.random.default_rng(seed).uniform(-0.5, 0.5, (n * n, 2))
     normals = star_normals(np.broadcast_to(jac, (n * n, 2, 2)), ANGLES)
-    p = render_star(np.broadcast_to(kernel, (n * n,) + kernel.shape), s, normals, frac, half)
+    p = render_star_fft(np.broadcast_to(kernel, (n * n,) + kernel.shape), s, normals, frac, half)
     P = 2 * half + 1
     frames = np.zeros((8, n * P, n * P), np.float32)
     centres = np.empty((n * n, 2))
@@ -51,3 +52,14 @@ def test_too_few_corners_are_left_as_they_are():
     q = np.array([[10.0, 10.0], [np.nan, np.nan]])
     out = bias_correct(np.zeros((8, 30, 30), np.float32), q, np.array([6.0, 6.0]))
     assert np.array_equal(out, q, equal_nan=True)
+
+
+def test_the_binned_rendering_is_the_fft_one():
+    from rotstar_mrcal.detect.psfbias import _padded
+
+    rng = np.random.default_rng(1)
+    normals = star_normals(np.eye(2) + rng.normal(0, 0.2, (3, 2, 2)), ANGLES)
+    k = _padded([seidel_kernel(c, 0.0, 0.0) for c in (0.0, 1.0, 2.0)])
+    frac = rng.uniform(-0.5, 0.5, (3, 2))
+    a, b = render_star(k, 4, normals, frac, 10), render_star_fft(k, 4, normals, frac, 10)
+    assert np.abs(a - b).mean() < 2e-3 and np.abs(a - b).max() < 0.08
