@@ -200,10 +200,15 @@ def main(argv=None):
     p.add_argument("--focus", type=float, default=0.3)
     p.add_argument("--gaussian", type=float, default=0.0)
     p.add_argument("--npose", type=int, default=4)
+    p.add_argument("--noise", type=float, default=1.0,
+                   help="scale of the read noise (1 %%) and shot noise (1e-4); 0: noiseless frames, whose "
+                        "pose-dependent error is the methods' own")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--cache", default="/tmp/rotstar-psfcheck")
     p.add_argument("--methods", default="symmetric,psf,saddle")
     p.add_argument("--distance", default="", help="near,far metres (default: random_poses' range)")
+    p.add_argument("--no-display-maps", action="store_true",
+                   help="detect_pose(check_motion=False): no per-frame display maps in the joint refinement")
     p.add_argument("--check-blur-map", metavar="CSV", help="compare a blur map with the lens's true PSFs")
     p.add_argument("--timing", action="store_true",
                    help="also the CPU time of detect_pose per pose, symmetric, psf and psf-sim (the least of 3 runs each)")
@@ -222,6 +227,7 @@ def main(argv=None):
     tag += f"-n{a.npose}"  # random_poses' poses depend on how many
     fs = float(simulate.full_scale_code(16))
     methods = a.methods.split(",")
+    mc = not a.no_display_maps
     acc = {m: ([], [], [], []) for m in methods}  # positions, errors, seconds, true windows
     for i, rt in enumerate(rts):
         t0 = time.perf_counter()
@@ -232,7 +238,7 @@ def main(argv=None):
         rng = np.random.default_rng([5, a.seed, i])
 
         def expose(img):
-            return simulate.expose(img, gain=0.9, noise=0.01, shot=1e-4, bits=16, rng=rng)
+            return simulate.expose(img, gain=0.9, noise=0.01 * a.noise, shot=1e-4 * a.noise, bits=16, rng=rng)
 
         frames = expose(rot).astype(np.float32)
         if a.timing:
@@ -246,20 +252,21 @@ def main(argv=None):
                                      perturbed_start(truth, a.seed, i), true_windows(model, layout, rt))
             elif m.startswith("simbias-nodes"):  # simbias-nodes-S-N-D
                 S, NN, D = (int(v) for v in m.split("-")[2:5])
-                q = simbias_nodes(detect_pose(frames, layout, full_scale=fs), truth, psf, layout, S, NN, D)
+                q = simbias_nodes(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout, S, NN, D)
             elif m == "simbias-est":  # the estimated PSF, the true geometry and the raw frames
-                pc = detect_pose(frames, layout, full_scale=fs)
+                pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
                 q = pc.corners.copy()
                 jj, ii = np.nonzero(np.isfinite(q[..., 0]))
                 q[jj, ii] = bias_correct(frames, q[jj, ii], pc.window[jj, ii],
                                          grid_jacobian(truth, float(layout.pitch))[jj, ii],
                                          np.array([layout.angle(k) for k in range(layout.nframes)]), pc.prefilter_px)
             elif m == "simbias-true":
-                q = simbias_true(detect_pose(frames, layout, full_scale=fs), truth, psf, layout)
+                q = simbias_true(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout)
             elif m.startswith("simbias-moments"):  # simbias-moments-L: clipped to L px (0: edgespread's reach)
-                q = simbias_true(detect_pose(frames, layout, full_scale=fs), truth, psf, layout, float(m.split("-")[2]))
+                q = simbias_true(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout,
+                                 float(m.split("-")[2]))
             else:
-                q = detect_pose(frames, layout, full_scale=fs, refine=REFINERS[m]).corners
+                q = detect_pose(frames, layout, full_scale=fs, refine=REFINERS[m], check_motion=mc).corners
             dt = time.perf_counter() - t0
             e = q - truth
             ok = view & np.isfinite(e).all(axis=-1) & (np.linalg.norm(e, axis=-1) <= MATCH_PX)
@@ -269,7 +276,7 @@ def main(argv=None):
             acc[m][3].append(true_windows(model, layout, rt)[ok])
         print(f"pose {i}: windows {np.nanpercentile(true_windows(model, layout, rt), [5, 50, 95]).round(1)}",
               file=sys.stderr)
-    print(f"{tag}, {a.npose} poses (seed {a.seed})")
+    print(f"{tag}, {a.npose} poses (seed {a.seed})" + (f", noise x {a.noise:g}" if a.noise != 1 else ""))
     for m in methods:
         pos, err = np.concatenate(acc[m][0]), np.concatenate(acc[m][1])
         rms = float(np.sqrt((err ** 2).sum(axis=1).mean()))
