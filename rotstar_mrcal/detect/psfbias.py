@@ -181,75 +181,6 @@ def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, 
     return out
 
 
-def moment_tensors(es) -> tuple[np.ndarray, np.ndarray]:
-    """(cov (N, 2, 2), kappa (N, 4)) of the PSF from its projections' moments (edgespread.EdgeSpread)
-
-    var(phi) = s0 + s2c cos 2phi + s2s sin 2phi gives the covariance;
-    third(phi) = A cos phi + B sin phi + C cos 3phi + D sin 3phi the third
-    cumulant tensor kappa = (k_xxx, k_xxy, k_xyy, k_yyy), from
-    third(phi) = k_xxx c^3 + 3 k_xxy c^2 s + 3 k_xyy c s^2 + k_yyy s^3.
-    NaN rows where too few edges were measured.
-
-    >>> from rotstar_mrcal.detect.edgespread import projected_moments
-    >>> from rotstar_mrcal.optics.psf import gaussian_psf
-    >>> cov, kappa = moment_tensors(projected_moments(gaussian_psf(1.0, 4), 4, np.arange(16) * np.pi / 16, 6.0))
-    >>> np.round(cov, 2).tolist(), bool(np.abs(kappa).max() < 1e-6)
-    ([[[1.0, 0.0], [0.0, 1.0]]], True)
-    """
-    phi = es.normal
-    c1, s1 = np.cos(phi), np.sin(phi)
-    v = _harmonic(es.var, np.stack((np.ones_like(phi), np.cos(2 * phi), np.sin(2 * phi)), -1))
-    t = _harmonic(es.third, np.stack((c1, s1, np.cos(3 * phi), np.sin(3 * phi)), -1))
-    cov = np.stack((np.stack((v[:, 0] + v[:, 1], v[:, 2]), -1), np.stack((v[:, 2], v[:, 0] - v[:, 1]), -1)), -2)
-    A, B, C, D = t.T
-    kappa = np.stack((A + C, B / 3 + D, A / 3 - C, B - D), -1)
-    return cov, kappa
-
-
-def _harmonic(y, cols):
-    """Least-squares coefficients per row of y (N, E) on cols (N, E, p), NaNs left out (NaN: too few)"""
-    ok = np.isfinite(y) & np.isfinite(cols).all(-1)
-    A = np.where(ok[..., None], cols, 0.0)
-    AtA = np.einsum("nep,neq->npq", A, A)
-    enough = ok.sum(-1) > cols.shape[-1] + 1
-    AtA[~enough] = np.eye(cols.shape[-1])
-    coef = np.linalg.solve(AtA, np.einsum("nep,ne->np", A, np.where(ok, y, 0.0))[..., None])[..., 0]
-    coef[~enough] = np.nan
-    return coef
-
-
-def moment_kernel(cov: np.ndarray, kappa: np.ndarray, s: int, radius: float | None = None) -> np.ndarray:
-    """(N, k, k) kernels at s taps per px with covariance cov (N, 2, 2) and third cumulants kappa (N, 4)
-
-    A Gaussian times 1 + kappa . H3 / 6 (the Gram-Charlier series to third
-    order: mean 0, the covariance and third cumulants given; it may dip
-    below 0 where the skew is strong), sum 1. radius: px (default 5 sigma
-    of the widest).
-
-    >>> k = moment_kernel(np.eye(2)[None] * 1.0, np.array([[0.5, 0.0, 0.0, 0.0]]), 4)
-    >>> x = (np.arange(k.shape[2]) - k.shape[2] // 2) / 4
-    >>> round(float((k[0].sum(0) * x).sum()), 3) + 0.0, round(float((k[0].sum(0) * x ** 3).sum()), 2)
-    (0.0, 0.5)
-    """
-    cov = np.asarray(cov, float)
-    kappa = np.asarray(kappa, float)
-    if radius is None:
-        radius = 5 * float(np.sqrt(np.linalg.eigvalsh(cov)[:, -1].max()))
-    m = int(np.ceil(radius * s))
-    t = np.arange(-m, m + 1) / s
-    x = np.stack(np.broadcast_arrays(t[None, :], t[:, None]), -1)  # (k, k, 2) (x, y)
-    P = np.linalg.inv(cov)  # (N, 2, 2)
-    y = np.einsum("nij,abj->nabi", P, x)  # Sigma^-1 x
-    g = np.exp(-0.5 * np.einsum("nabi,abi->nab", y, x))
-    kxxx, kxxy, kxyy, kyyy = (kappa[:, i, None, None] for i in range(4))
-    y0, y1 = y[..., 0], y[..., 1]
-    p00, p01, p11 = (P[:, i, j, None, None] for i, j in ((0, 0), (0, 1), (1, 1)))
-    h = (kxxx * (y0 ** 3 - 3 * y0 * p00) + 3 * kxxy * (y0 * y0 * y1 - y1 * p00 - 2 * y0 * p01)
-         + 3 * kxyy * (y0 * y1 * y1 - y0 * p11 - 2 * y1 * p01) + kyyy * (y1 ** 3 - 3 * y1 * p11))
-    k = g * (1 + h / 6)
-    return k / k.sum(axis=(1, 2), keepdims=True)
-
-
 # ---------------------------------------------------------------------------
 # the local PSF from the edges' moments: a Seidel wavefront (coma, focus) per region
 # ---------------------------------------------------------------------------
@@ -375,64 +306,87 @@ DEGREE = 2  # of that field
 COMA_SIGNIFICANCE = 3.0  # a pooled coma below this many standard deviations of its plane is taken as 0
 
 
+def pooled_coma(frames, corners, window, shifts, at, min_window: float = 4.0, min_corners: int = 12,
+                optics=None) -> tuple[np.ndarray, np.ndarray] | None:
+    """(waves (M,), tail angle (M,)) of the pose's Seidel coma at points at (M, 2); None: too few corners measured
+
+    Each corner of min_window or more has its edge-spread third moment read
+    (edgespread.local_psf, one reach for the pose: 0.45 x the median
+    half-window, at least MIN_REACH, and the corners whose window holds it)
+    and turned into waves of coma (local_coma, focus 0) along its measured
+    direction. These vectors are pooled by a plane over the image (Seidel
+    coma grows linearly with the field radius) and read at `at`; a coma
+    below COMA_SIGNIFICANCE standard deviations of the plane there is 0.
+    """
+    q, w = corners, window
+    meas = np.isfinite(q).all(axis=1) & (w >= min_window)
+    if meas.sum() < min_corners:
+        return None
+    L = float(np.floor(np.clip(REACH_PER_WINDOW * np.median(w[meas]), MIN_REACH, MAX_REACH) / BIN_PX) * BIN_PX)
+    meas &= REACH_PER_WINDOW * w >= L - 1e-9
+    _, est = local_psf(frames, q[meas], w[meas], None if shifts is None else np.asarray(shifts, float)[:, meas],
+                       reach=L)
+    good = np.isfinite(est.coma) & (est.edges >= 2 * _nframes(frames) - 2)
+    if good.sum() < min_corners:
+        return None
+    cw = local_coma(est.coma[good], L, optics)
+    vec = cw[:, None] * np.stack((np.cos(est.coma_angle[good]), np.sin(est.coma_angle[good])), -1)
+    cv, sd = plane_with_sd(q[meas][good], vec, at)
+    c = np.hypot(cv[:, 0], cv[:, 1])
+    return np.where(c > COMA_SIGNIFICANCE * sd, c, 0.0), np.arctan2(cv[:, 1], cv[:, 0])
+
+
+def _nframes(frames) -> int:
+    return 1 if np.ndim(frames) == 2 else len(frames)
+
+
+def measured_normals(frames, corners, window, shifts=None) -> np.ndarray:
+    """(N, K, 2, 2) each frame's two edge normals at the corners, as edgespread measures them"""
+    ang = edge_spread(frames, corners, window, shifts, reach=MIN_REACH).normal.reshape(len(corners), -1, 2)
+    return np.stack((np.cos(ang), np.sin(ang)), -1)
+
+
 def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lowpass_sigma: float | None = None,
                  nodes: int = NODES, degree: int = DEGREE, optics=None, min_window: float = 4.0) -> np.ndarray:
     """(N, 2) the symmetric fit's corners (N, 2) less their simulated bias: the light's centroid
 
     frames (K, H, W) the raw rotating-star frames the corners were fitted on
-    (low-passed by lowpass_sigma first; None: refine.lowpass_sigma of the
+    (low-passed by lowpass_sigma first; None: refine.lowpass_for the
     windows, as detect_pose), window (N,) the fit's half-windows, shifts
-    (K, N, 2) display offsets or None. The local pattern: jac (N, 2, 2)
-    camera px per display px with angles (K,) the frames' rotations, or
-    (None) each frame's two edge normals as edgespread measures them at the
-    nodes. The local PSF:
-    each corner's edge-spread third moment (edgespread.local_psf, one reach
-    for the pose) is turned into waves of Seidel coma (local_coma, focus 0)
-    along its measured direction, these vectors are pooled over the pose by
-    a plane and read at `nodes` corners spread over the pose (0 where it is
-    below COMA_SIGNIFICANCE of the plane's standard deviation there);
-    the bias of the
-    same fit on the local star through that PSF (simulated_bias) is carried
-    to every corner by a smooth field. Fewer than 2 x the field's terms of
-    measured corners: the corners are returned unchanged.
+    (K, N, 2) display offsets or None. The local PSF: pooled_coma at `nodes`
+    corners spread over the pose (spread_nodes). The local pattern: jac
+    (N, 2, 2) camera px per display px with angles (K,) the frames'
+    rotations, or (None) the edge normals measured at the nodes. The bias
+    of the same fit on the local star through that PSF (simulated_bias;
+    the kernel computed with its tail along +x and the pattern turned
+    instead) is carried to every corner by a smooth field of `degree`.
+    Fewer than 2 x the field's terms of corners measured or simulated, or
+    no coma at any node: the corners are returned unchanged; a node without
+    coma has no bias.
     """
     q = np.asarray(corners, float).reshape(-1, 2)
     w = np.broadcast_to(np.asarray(window, float), (len(q),))
-    fin = np.isfinite(q).all(axis=1) & np.isfinite(w)
-    meas = fin & (w >= min_window)
-    nterm = (degree + 1) * (degree + 2) // 2
-    if meas.sum() < 2 * nterm:
+    idx = np.flatnonzero(np.isfinite(q).all(axis=1) & np.isfinite(w))
+    enough = (degree + 1) * (degree + 2)
+    if len(idx) < enough:
         return q.copy()
-    L = float(np.floor(np.clip(REACH_PER_WINDOW * np.median(w[meas]), MIN_REACH, MAX_REACH) / BIN_PX) * BIN_PX)
-    meas &= REACH_PER_WINDOW * w >= L - 1e-9
-    sh = None if shifts is None else np.asarray(shifts, float)[:, meas]
-    _, est = local_psf(frames, q[meas], w[meas], sh, reach=L)
-    good = np.isfinite(est.width) & np.isfinite(est.coma) & (est.edges >= 2 * (1 if np.ndim(frames) == 2 else
-                                                                                  len(frames)) - 2)
-    if good.sum() < 2 * nterm:
-        return q.copy()
-    idx = np.flatnonzero(fin)
     nd = idx[spread_nodes(q[idx], nodes)]
-    # each corner's coma (waves) from its third moment, as a vector along its tail: linear over the image
-    # for a centred lens (Seidel coma grows with the field radius), so pooled by a plane
-    cw = local_coma(est.coma[good], L, optics)
-    vec = cw[:, None] * np.stack((np.cos(est.coma_angle[good]), np.sin(est.coma_angle[good])), -1)
-    cv, sd = plane_with_sd(q[meas][good], vec, q[nd])
-    c, a = np.hypot(cv[:, 0], cv[:, 1]), np.arctan2(cv[:, 1], cv[:, 0])
-    c = np.where(c > COMA_SIGNIFICANCE * sd, c, 0.0)  # a coma the edges do not show (symmetric PSF): none
+    coma = pooled_coma(frames, q, w, shifts, q[nd], min_window, enough, optics)
+    if coma is None:
+        return q.copy()
+    c, a = coma
+    if not c.any():  # no coma shown: the symmetric fit is where the light's centroid is
+        return q.copy()
     if jac is not None:
         normals = star_normals(np.asarray(jac, float)[nd], angles)
     else:
-        K = 1 if np.ndim(frames) == 2 else len(frames)
-        ang = edge_spread(frames, q[nd], w[nd], None if shifts is None else np.asarray(shifts)[:, nd],
-                          reach=MIN_REACH).normal.reshape(len(nd), K, 2)
-        normals = np.stack((np.cos(ang), np.sin(ang)), -1)
-    sigma = lowpass_for(w[fin]) if lowpass_sigma is None else lowpass_sigma
-    # the coma's direction turned into the pattern's: the kernel of each coma is computed once, tail along +x
+        normals = measured_normals(frames, q[nd], w[nd], None if shifts is None else np.asarray(shifts)[:, nd])
+    sigma = lowpass_for(w[idx]) if lowpass_sigma is None else lowpass_sigma
     kern = _padded([seidel_kernel(ci, 0.0, 0.0, optics) for ci in c])
     b = _turned(simulated_bias(kern, SUPERSAMPLE, _turned(normals, -a), q[nd], w[nd], sigma), a)
+    b[c == 0] = 0.0  # (the sharp diffraction kernel's own small offsets from the pixel grid are not the lens's)
     ok = np.isfinite(b).all(axis=1)
     out = q.copy()
-    if ok.sum() >= 2 * nterm:
+    if ok.sum() >= enough:
         out[idx] -= smooth_field(q[nd][ok], b[ok], degree, at=q[idx])
     return out
