@@ -13,7 +13,7 @@ ANGLES = np.arange(8) * np.pi / 16
 
 
 def star_mosaic(kernel, jac, n=4, half=14, s=4, seed=0):
-    """(frames (8, H, W) of n x n local stars through kernel (by FFT), their centres (n*n, 2)), random sub-pixel phases"""
+    """(frames (8, H, W) of n x n local stars through kernel (by FFT), their centres (n*n, 2)); random phases"""
     frac = np.random.default_rng(seed).uniform(-0.5, 0.5, (n * n, 2))
     normals = star_normals(np.broadcast_to(jac, (n * n, 2, 2)), ANGLES)
     p = render_star_fft(np.broadcast_to(kernel, (n * n,) + kernel.shape), s, normals, frac, half)

@@ -22,6 +22,16 @@ projections on 16 directions clipped to the row's reach): the width ratio,
 and the coma direction error where the coma is above 0.5 waves, per corner
 and pooled in 128-px cells.
 
+Methods: the refiners' names (symmetric, psf, psf-sim: detect_pose with
+REFINERS[name]), saddle, and the experiments of bias by simulation
+(detect/psfbias.py) on the symmetric fit's corners with the truth's help:
+simbias-true (the simulator's own kernel at each corner and the true element
+geometry), simbias-nodes-S-N-D (the same at N corners, S sub-pixels per px,
+a field of degree D between), simbias-moments-L (a Gram-Charlier kernel of
+the true kernel's moments clipped to L px, 0: edgespread's reach),
+simbias-est (psf-sim's estimate with the true geometry). --noise 0 renders
+noiseless frames, --no-display-maps leaves the per-frame display maps out.
+
 Printed: per method the RMS of the corner error against the truth, and its
 pose-dependent part: the error minus the mean error of its image cell
 (CELL_PX squares, over all poses; cells with one corner left out), RMS, with
@@ -281,7 +291,8 @@ def main(argv=None):
                    help="detect_pose(check_motion=False): no per-frame display maps in the joint refinement")
     p.add_argument("--check-blur-map", metavar="CSV", help="compare a blur map with the lens's true PSFs")
     p.add_argument("--timing", action="store_true",
-                   help="also the CPU time of detect_pose per pose, symmetric, psf and psf-sim (the least of 3 runs each)")
+                   help="also the CPU time of detect_pose per pose, symmetric, psf and psf-sim "
+                        "(the least of 3 runs each)")
     a = p.parse_args(argv)
     if a.check_blur_map:
         return check_blur_map(a.check_blur_map, a.coma, a.focus)
@@ -322,7 +333,8 @@ def main(argv=None):
                                      perturbed_start(truth, a.seed, i), true_windows(model, layout, rt))
             elif m.startswith("simbias-nodes"):  # simbias-nodes-S-N-D
                 S, NN, D = (int(v) for v in m.split("-")[2:5])
-                q = simbias_nodes(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout, S, NN, D)
+                q = simbias_nodes(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout,
+                                  S, NN, D)
             elif m == "simbias-est":  # the estimated PSF, the true geometry and the raw frames
                 pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
                 q = pc.corners.copy()
