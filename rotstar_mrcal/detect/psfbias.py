@@ -314,32 +314,37 @@ DEGREE = 2  # of that field
 COMA_SIGNIFICANCE = 3.0  # a pooled coma below this many standard deviations of its plane is taken as 0
 
 
-def pooled_coma(frames, corners, window, shifts, at, min_window: float = 4.0, min_corners: int = 12,
-                optics=None) -> tuple[np.ndarray, np.ndarray] | None:
-    """(waves (M,), tail angle (M,)) of the pose's Seidel coma at points at (M, 2); None: too few corners measured
+def coma_samples(frames, corners, window, shifts=None, min_window: float = 4.0,
+                 optics=None) -> tuple[np.ndarray, np.ndarray]:
+    """(xy (M, 2), coma vectors (M, 2), waves along the tail) of the corners whose edges show it
 
     Each corner of min_window or more has its edge-spread third moment read
-    (edgespread.local_psf, one reach for the pose: 0.45 x the median
+    (edgespread.local_psf, one reach for the call: 0.45 x the median
     half-window, at least MIN_REACH, and the corners whose window holds it)
     and turned into waves of coma (local_coma, focus 0) along its measured
-    direction. These vectors are pooled by a plane over the image (Seidel
-    coma grows linearly with the field radius) and read at `at`; a coma
-    below COMA_SIGNIFICANCE standard deviations of the plane there is 0.
+    direction. Corners with edges missing are left out.
     """
-    q, w = corners, window
+    q, w = np.asarray(corners, float).reshape(-1, 2), np.broadcast_to(np.asarray(window, float), (len(corners),))
     meas = np.isfinite(q).all(axis=1) & (w >= min_window)
-    if meas.sum() < min_corners:
-        return None
+    if not meas.any():
+        return np.zeros((0, 2)), np.zeros((0, 2))
     L = float(np.floor(np.clip(REACH_PER_WINDOW * np.median(w[meas]), MIN_REACH, MAX_REACH) / BIN_PX) * BIN_PX)
     meas &= REACH_PER_WINDOW * w >= L - 1e-9
     _, est = local_psf(frames, q[meas], w[meas], None if shifts is None else np.asarray(shifts, float)[:, meas],
                        reach=L)
     good = np.isfinite(est.coma) & (est.edges >= 2 * _nframes(frames) - 2)
-    if good.sum() < min_corners:
-        return None
     cw = local_coma(est.coma[good], L, optics)
-    vec = cw[:, None] * np.stack((np.cos(est.coma_angle[good]), np.sin(est.coma_angle[good])), -1)
-    cv, sd = plane_with_sd(q[meas][good], vec, at)
+    return q[meas][good], cw[:, None] * np.stack((np.cos(est.coma_angle[good]), np.sin(est.coma_angle[good])), -1)
+
+
+def pooled_coma(xy: np.ndarray, vec: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(waves (M,), tail angle (M,)) of the coma at points at (M, 2) from coma_samples' (xy, vec)
+
+    The vectors pooled by a plane over the image (Seidel coma grows linearly
+    with the field radius) and read at `at`; a coma below COMA_SIGNIFICANCE
+    standard deviations of the plane there is 0.
+    """
+    cv, sd = plane_with_sd(xy, vec, at)
     c = np.hypot(cv[:, 0], cv[:, 1])
     return np.where(c > COMA_SIGNIFICANCE * sd, c, 0.0), np.arctan2(cv[:, 1], cv[:, 0])
 
@@ -355,14 +360,16 @@ def measured_normals(frames, corners, window, shifts=None) -> np.ndarray:
 
 
 def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lowpass_sigma: float | None = None,
-                 nodes: int = NODES, degree: int = DEGREE, optics=None, min_window: float = 4.0) -> np.ndarray:
+                 nodes: int = NODES, degree: int = DEGREE, optics=None, min_window: float = 4.0,
+                 samples: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(N, 2) the symmetric fit's corners (N, 2) less their simulated bias: the light's centroid
 
     frames (K, H, W) the raw rotating-star frames the corners were fitted on
     (low-passed by lowpass_sigma first; None: refine.lowpass_for the
     windows, as detect_pose), window (N,) the fit's half-windows, shifts
     (K, N, 2) display offsets or None. The local PSF: pooled_coma at `nodes`
-    corners spread over the pose (spread_nodes). The local pattern: jac
+    corners spread over the pose (spread_nodes), of this pose's coma_samples
+    or of `samples` (xy, vectors) given (e.g. a dataset's). The local pattern: jac
     (N, 2, 2) camera px per display px with angles (K,) the frames'
     rotations, or (None) the edge normals measured at the nodes. The bias
     of the same fit on the local star through that PSF (simulated_bias;
@@ -379,10 +386,10 @@ def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lo
     if len(idx) < enough:
         return q.copy()
     nd = idx[spread_nodes(q[idx], nodes)]
-    coma = pooled_coma(frames, q, w, shifts, q[nd], min_window, enough, optics)
-    if coma is None:
+    xy, vec = coma_samples(frames, q, w, shifts, min_window, optics) if samples is None else samples
+    if len(xy) < enough:
         return q.copy()
-    c, a = coma
+    c, a = pooled_coma(xy, vec, q[nd])
     if not c.any():  # no coma shown: the symmetric fit is where the light's centroid is
         return q.copy()
     if jac is not None:

@@ -52,7 +52,7 @@ from rotstar_mrcal import simulate
 from rotstar_mrcal.detect.blurmap import read_table
 from rotstar_mrcal.detect.edgespread import projected_moments, psf_estimate
 from rotstar_mrcal.detect.pipeline import detect_pose
-from rotstar_mrcal.detect.psfbias import bias_correct, simulated_bias, spread_nodes, star_normals
+from rotstar_mrcal.detect.psfbias import bias_correct, coma_samples, simulated_bias, spread_nodes, star_normals
 from rotstar_mrcal.optics.psf import LensPSF
 from rotstar_mrcal.optics.wavefront import Seidel
 from rotstar_mrcal.peers.checkerboard import refine_by_window, saddle_refine
@@ -231,6 +231,40 @@ def simbias_true(pc, truth, psf, layout, reach=None) -> np.ndarray:
     return q
 
 
+def samples_from(model, layout, psf, a, dist, fs, mc):
+    """coma_samples of the poses at distances dist (near, far), the same lens, npose and seed (renders cached)"""
+    tag = (f"g{a.gaussian:g}" if a.gaussian > 0 else f"c{a.coma:g}f{a.focus:g}") + f"-d{dist[0]:g},{dist[1]:g}"
+    xy, vec = [], []
+    for i, rt in enumerate(simulate.random_poses(model, layout, a.npose, np.random.default_rng([3, a.seed]),
+                                                 distance=dist)):
+        rot, _ = render(model, layout, rt, psf, os.path.join(a.cache, f"{tag}-n{a.npose}-s{a.seed}-p{i}.npz"))
+        rng = np.random.default_rng([5, a.seed, i])
+        frames = simulate.expose(rot, gain=0.9, noise=0.01 * a.noise, shot=1e-4 * a.noise, bits=16,
+                                 rng=rng).astype(np.float32)
+        pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
+        jj, ii = np.nonzero(np.isfinite(pc.corners[..., 0]))
+        x, v = coma_samples(frames, pc.corners[jj, ii], pc.window[jj, ii])
+        xy.append(x)
+        vec.append(v)
+    return np.concatenate(xy), np.concatenate(vec)
+
+
+def dataset_correction(poses, acc, extra=None):
+    """psf-sim with the coma pooled over all poses (coma_samples of each, or extra (xy, vec)), appended to acc"""
+    xy = np.concatenate([p[5][0] for p in poses] + ([] if extra is None else [extra[0]]))
+    vec = np.concatenate([p[5][1] for p in poses] + ([] if extra is None else [extra[1]]))
+    print(f"psf-sim-dataset: {len(xy)} corners show the coma", file=sys.stderr)
+    for frames, pc, truth, view, tw, _ in poses:
+        t0 = time.perf_counter()
+        q = pc.corners.copy()
+        jj, ii = np.nonzero(np.isfinite(q[..., 0]))
+        q[jj, ii] = bias_correct(frames, q[jj, ii], pc.window[jj, ii], samples=(xy, vec))
+        e = q - truth
+        ok = view & np.isfinite(e).all(axis=-1) & (np.linalg.norm(e, axis=-1) <= MATCH_PX)
+        for k, v in enumerate((truth[ok], e[ok], time.perf_counter() - t0, tw[ok])):
+            acc[k].append(v)
+
+
 def cpu_time(frames, layout, fs, refine: str, repeats: int = 3) -> float:
     """The least CPU time (s) of `repeats` detect_pose runs with REFINERS[refine]"""
     best = math.inf
@@ -287,6 +321,9 @@ def main(argv=None):
     p.add_argument("--cache", default="/tmp/rotstar-psfcheck")
     p.add_argument("--methods", default="symmetric,psf,saddle")
     p.add_argument("--distance", default="", help="near,far metres (default: random_poses' range)")
+    p.add_argument("--coma-from", metavar="NEAR,FAR",
+                   help="psf-sim-dataset: the coma pooled from the same lens's poses at this distance range "
+                        "(as --distance) instead of these poses")
     p.add_argument("--no-display-maps", action="store_true",
                    help="detect_pose(check_motion=False): no per-frame display maps in the joint refinement")
     p.add_argument("--check-blur-map", metavar="CSV", help="compare a blur map with the lens's true PSFs")
@@ -310,6 +347,7 @@ def main(argv=None):
     methods = a.methods.split(",")
     mc = not a.no_display_maps
     acc = {m: ([], [], [], []) for m in methods}  # positions, errors, seconds, true windows
+    later = []  # psf-sim-dataset's poses
     for i, rt in enumerate(rts):
         t0 = time.perf_counter()
         rot, cb = render(model, layout, rt, psf, os.path.join(a.cache, f"{tag}-s{a.seed}-p{i}.npz"))
@@ -340,13 +378,20 @@ def main(argv=None):
                 q = pc.corners.copy()
                 jj, ii = np.nonzero(np.isfinite(q[..., 0]))
                 q[jj, ii] = bias_correct(frames, q[jj, ii], pc.window[jj, ii],
-                                         grid_jacobian(truth, float(layout.pitch))[jj, ii],
-                                         np.array([layout.angle(k) for k in range(layout.nframes)]), pc.prefilter_px)
+                                         jac=grid_jacobian(truth, float(layout.pitch))[jj, ii],
+                                         angles=np.array([layout.angle(k) for k in range(layout.nframes)]),
+                                         lowpass_sigma=pc.prefilter_px)
             elif m == "simbias-true":
                 q = simbias_true(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout)
             elif m.startswith("simbias-moments"):  # simbias-moments-L: clipped to L px (0: edgespread's reach)
                 q = simbias_true(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout,
                                  float(m.split("-")[2]))
+            elif m == "psf-sim-dataset":  # the symmetric fit now, the correction once every pose's coma is in
+                pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
+                jj, ii = np.nonzero(np.isfinite(pc.corners[..., 0]))
+                later.append((frames, pc, truth, view, true_windows(model, layout, rt),
+                              coma_samples(frames, pc.corners[jj, ii], pc.window[jj, ii])))
+                continue
             else:
                 q = detect_pose(frames, layout, full_scale=fs, refine=REFINERS[m], check_motion=mc).corners
             dt = time.perf_counter() - t0
@@ -358,6 +403,11 @@ def main(argv=None):
             acc[m][3].append(true_windows(model, layout, rt)[ok])
         print(f"pose {i}: windows {np.nanpercentile(true_windows(model, layout, rt), [5, 50, 95]).round(1)}",
               file=sys.stderr)
+    if later:
+        extra = None
+        if a.coma_from:
+            extra = samples_from(model, layout, psf, a, tuple(float(v) for v in a.coma_from.split(",")), fs, mc)
+        dataset_correction(later, acc["psf-sim-dataset"], extra)
     print(f"{tag}, {a.npose} poses (seed {a.seed})" + (f", noise x {a.noise:g}" if a.noise != 1 else ""))
     for m in methods:
         pos, err = np.concatenate(acc[m][0]), np.concatenate(acc[m][1])
