@@ -94,6 +94,8 @@ class PoseCorners:
     unplaced: list | None = None  # why, for each element seen whose identity was not read
     blur: np.ndarray | None = None  # (ny, nx, len(BLUR_FIELDS)) the local PSF per corner (detect_pose(blur_map=True))
     prefilter_px: float = 0.0  # the Gaussian low-pass (px) the symmetric refinement ran on
+    samples: tuple | None = None  # what refine.samples measured on the pose (image coordinates), or None
+    correction: np.ndarray | None = None  # (ny, nx, 2) what refine.correct added to the symmetric fit's corners
 
     @property
     def found(self) -> bool:
@@ -326,6 +328,7 @@ def detect_pose(
     cov = np.full((layout.ny, layout.nx, 2, 2), np.nan)
     motion = 0.0
     shifts = None
+    samples = None
     if refine.needs == "rotstar":  # the paper's symmetric refinement, display maps and motion check
         lowpass_sigma = lowpass_for(w, prefilter_sigma)
         lowpass = prefilter(frames, lowpass_sigma)
@@ -339,8 +342,15 @@ def detect_pose(
                                      f"(the frames bend against each other by {motion:.2f} px beyond what one "
                                      f"affine map per frame explains, limit {max_motion})")
         q, ok = res.corners, res.ok
+        q_sym = q
         if refine.correct is not None:  # e.g. the PSF-aware refiner: from the symmetric corner to the light's
-            q = refine.correct(frames, q, w, image_shifts(shifts, q, labels, layout.pitch))
+            sh = image_shifts(shifts, q, labels, layout.pitch)
+            if refine.samples is None:
+                q = refine.correct(frames, q, w, sh)
+            else:
+                measured = refine.samples(frames, q, w, sh)
+                q = refine.correct(frames, q, w, sh, samples=measured)
+                samples = (measured[0] + off, measured[1])
         reasons[labels[:, 1], labels[:, 0]] = res.reason
         sigma[labels[:, 1], labels[:, 0]] = res.sigma
         cov[labels[:, 1], labels[:, 0]] = res.cov
@@ -376,5 +386,9 @@ def detect_pose(
     if blur_map:
         blur = np.full((layout.ny, layout.nx, len(BLUR_FIELDS)), np.nan)
         blur[labels[:, 1], labels[:, 0]] = blur_columns(frames, q, w)
+    correction = None
+    if samples is not None:
+        correction = np.full((layout.ny, layout.nx, 2), np.nan)
+        correction[labels[:, 1], labels[:, 0]] = q - q_sym
     return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced, blur,
-                       lowpass_sigma if refine.needs == "rotstar" else 0.0)
+                       lowpass_sigma if refine.needs == "rotstar" else 0.0, samples, correction)

@@ -55,7 +55,7 @@ import numpy as np
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.detect.pipeline import detect_pose
 from rotstar_mrcal.detect.edgespread import psf_correct
-from rotstar_mrcal.detect.psfbias import bias_correct
+from rotstar_mrcal.detect.psfbias import bias_correct, coma_samples
 from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, lowpass_for, prefilter, refine_symmetric
 from rotstar_mrcal.peers import checkerboard as baselines
 from rotstar_mrcal.peers.checkerboard import (
@@ -109,7 +109,7 @@ def refine_psf_sim(frames, starts, window=10.0) -> np.ndarray:
 
 PSF_SIM = Refiner("psf-sim", "rotstar", "the symmetric fit less its bias under the local PSF: the same fit run on "
                   "the local star rendered through the Seidel coma that the edges' third moments show "
-                  "(detect.psfbias)", refine_psf_sim, correct=bias_correct)
+                  "(detect.psfbias)", refine_psf_sim, correct=bias_correct, samples=coma_samples)
 
 
 REFINERS = {r.name: r for r in (
