@@ -67,8 +67,8 @@ def parse_args(argv=None):
                         "at its line-spread function's mean (corners whose window is under 5 px keep the symmetric "
                         "fit's; doc/blur-map.md); "
                         "psf-sim: the symmetric fit less its offset from the light's centroid, found by running the "
-                        "same fit on the local star rendered through the coma the edges show (poses with windows "
-                        "under 4 px are left as the symmetric fit has them; doc/blur-map.md); "
+                        "same fit on the local star rendered through the coma the edges show, pooled over the "
+                        "dataset's poses (it needs some views with windows of 4 px or more; doc/blur-map.md); "
                         "saddle: Lucchese-Mitra saddle fit on the checkerboard frame")
     p.add_argument("--method", choices=DETECT_METHODS, default="rotstar",
                    help="whose corners to write, all from the same poses and started from the rotating star's "
