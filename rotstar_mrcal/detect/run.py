@@ -199,7 +199,9 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
     blur_map: also the local PSF at every corner (PoseCorners.blur, detect_pose(blur_map=True)).
     """
     poses = ds.poses[k]
-    opts = dict(window=window, refine=refine, max_motion=max_motion, method=method, blur_map=blur_map)
+    # a refiner whose correction pools the poses' measurements measures in the first pass and corrects after it
+    first = refine if refine.samples is None else dataclasses.replace(refine, correct=corners_as_they_are)
+    opts = dict(window=window, refine=first, max_motion=max_motion, method=method, blur_map=blur_map)
     done: dict[str, PoseResult] = {}
     for r in process_map(detect_one, [(ds.path, p, ds.frames, ds.layout, opts) for p in poses], jobs):
         done[r.pose] = r
@@ -228,6 +230,11 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
     return DatasetCorners(ds.path, ds.layout, ds.pattern, results, display, rejected)
 
 
+def corners_as_they_are(frames, corners, window, shifts, samples=None) -> np.ndarray:
+    """A Refiner's correct that changes nothing (detect_camera's first pass of a pooling refiner)"""
+    return corners
+
+
 def correct_with_dataset(layout: Layout, poses: list[PoseCorners], refine: Refiner) -> None:
     """Every pose's corners corrected again by refine.correct with what refine.samples measured on ALL poses
 
@@ -235,10 +242,10 @@ def correct_with_dataset(layout: Layout, poses: list[PoseCorners], refine: Refin
     large; poses whose windows are all small get it from the others.) In
     place; each pose's symmetric corners are its corners less its own
     correction, its element Jacobians those of its corners' homography.
-    Nothing is done with fewer than two poses that measured something.
+    detect_camera's first pass leaves the corrections to this (corners_as_they_are).
     """
     have = [p for p in poses if p.samples is not None and p.correction is not None]
-    if len(have) < 2:
+    if not have:
         return
     pooled = tuple(np.concatenate([p.samples[i] for p in have]) for i in (0, 1))
     angles = np.array([layout.angle(k) for k in range(layout.nframes)])
