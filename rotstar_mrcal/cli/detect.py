@@ -66,6 +66,9 @@ def parse_args(argv=None):
                         "psf: the symmetric fit moved to the light's centroid, where the 16 edges meet, each placed "
                         "at its line-spread function's mean (corners whose window is under 5 px keep the symmetric "
                         "fit's; doc/blur-map.md); "
+                        "psf-sim: the symmetric fit less its offset from the light's centroid, found by running the "
+                        "same fit on the local star rendered through the coma the edges show, pooled over the "
+                        "dataset's poses (it needs some views with windows of 4 px or more; doc/blur-map.md); "
                         "saddle: Lucchese-Mitra saddle fit on the checkerboard frame")
     p.add_argument("--method", choices=DETECT_METHODS, default="rotstar",
                    help="whose corners to write, all from the same poses and started from the rotating star's "

@@ -75,7 +75,8 @@ from rotstar_mrcal.detect.display_offsets import (
 )
 from rotstar_mrcal.detect.edgespread import BLUR_FIELDS, blur_columns
 from rotstar_mrcal.detect.elements import by_graph, by_identity
-from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_each_frame, symmetric_refine
+from rotstar_mrcal.detect.refine import (PREFILTER_SIGMA, SYMMETRIC, Refiner, lowpass_for, prefilter,
+                                         refine_each_frame, symmetric_refine)
 from rotstar_mrcal.detect.response import pixel_noise
 from rotstar_mrcal.detect.sequence import check_band_parity
 
@@ -93,6 +94,8 @@ class PoseCorners:
     unplaced: list | None = None  # why, for each element seen whose identity was not read
     blur: np.ndarray | None = None  # (ny, nx, len(BLUR_FIELDS)) the local PSF per corner (detect_pose(blur_map=True))
     prefilter_px: float = 0.0  # the Gaussian low-pass (px) the symmetric refinement ran on
+    samples: tuple | None = None  # what refine.samples measured on the pose (image coordinates), or None
+    correction: np.ndarray | None = None  # (ny, nx, 2) what refine.correct added to the symmetric fit's corners
 
     @property
     def found(self) -> bool:
@@ -184,24 +187,8 @@ def per_frame_corners(frames: np.ndarray, corners: np.ndarray, window: np.ndarra
 
 
 MAX_SIGMA_RATIO = 3.0  # a corner's refinement residual over the board's median (whole views: <= 1.3)
-PREFILTER_SIGMA = 1.0  # px: the Gaussian low-pass before the symmetric refinement (module doc) ...
-PREFILTER_PER_WINDOW = 0.25  # ... at most this fraction of the pose's median half-window (small elements)
 
 
-def prefilter(frames: np.ndarray, sigma: float = PREFILTER_SIGMA) -> np.ndarray:
-    """The frames low-passed by a Gaussian of sigma px (edge pixels replicated); sigma 0: unchanged
-
-    SYNOPSIS
-
-        >>> f = np.zeros((1, 9, 9), np.float32); f[0, 4, 4] = 1
-        >>> g = prefilter(f, 1.0)
-        >>> round(float(g.sum()), 3), bool(g[0, 4, 4] == g.max()), g.dtype
-        (1.0, True, dtype('float32'))
-    """
-    frames = np.asarray(frames, np.float32)
-    if sigma <= 0:
-        return frames
-    return np.stack([cv2.GaussianBlur(f, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE) for f in frames])
 SHIFT_MIN_PX = 0.02  # display maps that move no corner by this much (camera px) are not modelled in the refinement
 
 
@@ -341,8 +328,9 @@ def detect_pose(
     cov = np.full((layout.ny, layout.nx, 2, 2), np.nan)
     motion = 0.0
     shifts = None
+    samples = None
     if refine.needs == "rotstar":  # the paper's symmetric refinement, display maps and motion check
-        lowpass_sigma = min(prefilter_sigma, PREFILTER_PER_WINDOW * float(np.median(w)))
+        lowpass_sigma = lowpass_for(w, prefilter_sigma)
         lowpass = prefilter(frames, lowpass_sigma)
         res = symmetric_refine(lowpass, rough, w)
         if check_motion and res.ok.sum() >= 4:
@@ -354,8 +342,15 @@ def detect_pose(
                                      f"(the frames bend against each other by {motion:.2f} px beyond what one "
                                      f"affine map per frame explains, limit {max_motion})")
         q, ok = res.corners, res.ok
+        q_sym = q
         if refine.correct is not None:  # e.g. the PSF-aware refiner: from the symmetric corner to the light's
-            q = refine.correct(frames, q, w, image_shifts(shifts, q, labels, layout.pitch))
+            sh = image_shifts(shifts, q, labels, layout.pitch)
+            if refine.samples is None:
+                q = refine.correct(frames, q, w, sh)
+            else:
+                measured = refine.samples(frames, q, w, sh)
+                q = refine.correct(frames, q, w, sh, samples=measured)
+                samples = (measured[0] + off, measured[1])
         reasons[labels[:, 1], labels[:, 0]] = res.reason
         sigma[labels[:, 1], labels[:, 0]] = res.sigma
         cov[labels[:, 1], labels[:, 0]] = res.cov
@@ -391,5 +386,9 @@ def detect_pose(
     if blur_map:
         blur = np.full((layout.ny, layout.nx, len(BLUR_FIELDS)), np.nan)
         blur[labels[:, 1], labels[:, 0]] = blur_columns(frames, q, w)
+    correction = None
+    if samples is not None:
+        correction = np.full((layout.ny, layout.nx, 2), np.nan)
+        correction[labels[:, 1], labels[:, 0]] = q - q_sym
     return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced, blur,
-                       lowpass_sigma if refine.needs == "rotstar" else 0.0)
+                       lowpass_sigma if refine.needs == "rotstar" else 0.0, samples, correction)

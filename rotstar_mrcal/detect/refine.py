@@ -46,6 +46,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable
 
+import cv2
 import numpy as np
 
 
@@ -169,6 +170,35 @@ def _normal(r, jx, jy):
     return JtJ, Jtr, cost
 
 
+PREFILTER_SIGMA = 1.0  # px: the Gaussian low-pass before the symmetric refinement (pipeline's module doc) ...
+PREFILTER_PER_WINDOW = 0.25  # ... at most this fraction of the pose's median half-window (small elements)
+
+
+def lowpass_for(windows, sigma: float = PREFILTER_SIGMA) -> float:
+    """The low-pass (px) detect_pose uses for a pose whose corners have these half-windows
+
+    >>> lowpass_for([3.0, 4.0, 5.0]), lowpass_for([8.0, 10.0])
+    (1.0, 1.0)
+    >>> lowpass_for([2.0, 3.0, 3.0])
+    0.75
+    """
+    return min(sigma, PREFILTER_PER_WINDOW * float(np.median(windows)))
+
+
+def prefilter(frames: np.ndarray, sigma: float = PREFILTER_SIGMA) -> np.ndarray:
+    """The frames low-passed by a Gaussian of sigma px (edge pixels replicated); sigma 0: unchanged
+
+    SYNOPSIS
+
+        >>> f = np.zeros((1, 9, 9), np.float32); f[0, 4, 4] = 1
+        >>> g = prefilter(f, 1.0)
+        >>> round(float(g.sum()), 3), bool(g[0, 4, 4] == g.max()), g.dtype
+        (1.0, True, dtype('float32'))
+    """
+    frames = np.asarray(frames, np.float32)
+    if sigma <= 0:
+        return frames
+    return np.stack([cv2.GaussianBlur(f, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE) for f in frames])
 def _frame_stack(frames) -> np.ndarray:
     """(nframes, H, W) float32 of one frame (H, W) or a stack"""
     frames = np.asarray(frames, np.float32)
@@ -347,6 +377,9 @@ class Refiner:
     refine: Callable  # (frames (K, H, W), starts (N, 2), window) -> (N, 2), NaN = failed
     correct: Callable | None = None  # needs 'rotstar' only: (frames, symmetric corners (N, 2), windows (N,),
     # display offsets (K, N, 2) or None) -> (N, 2), applied by detect_pose after its symmetric refinement
+    samples: Callable | None = None  # with correct: (the same arguments) -> what the correction measured on the
+    # pose (psf-sim: the corners' coma, psfbias.coma_samples), handed back as correct(..., samples=); a dataset
+    # pools them over its poses and corrects every pose again with the pool (run.correct_with_dataset)
 
 
 def refine_symmetric(frames, starts, window=10.0) -> np.ndarray:

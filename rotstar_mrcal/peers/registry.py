@@ -8,9 +8,9 @@ SYNOPSIS
     >>> METHODS["saddle"].needs, METHODS["saddle"].start
     ('checkerboard', 'rotstar')
     >>> method_names(needs=("rotstar", "checkerboard"), start="own")
-    ['rotstar', 'rotstar-weighted', 'opencv-sb', 'opencv-classic', 'rotstar-psf']
+    ['rotstar', 'rotstar-weighted', 'opencv-sb', 'opencv-classic', 'rotstar-psf', 'rotstar-psf-sim']
     >>> list(REFINERS)
-    ['symmetric', 'psf', 'opencv', 'saddle']
+    ['symmetric', 'psf', 'psf-sim', 'opencv', 'saddle']
 
 A *method* turns the images of one pose into labelled corners (ny, nx, 2)
 (mrcal order, NaN = missing) or no board. Its entry says:
@@ -55,8 +55,8 @@ import numpy as np
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.detect.pipeline import detect_pose
 from rotstar_mrcal.detect.edgespread import psf_correct
-from rotstar_mrcal.detect.pipeline import prefilter
-from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, refine_symmetric
+from rotstar_mrcal.detect.psfbias import bias_correct, coma_samples
+from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, lowpass_for, prefilter, refine_symmetric
 from rotstar_mrcal.peers import checkerboard as baselines
 from rotstar_mrcal.peers.checkerboard import (
     mrgingham_detect, opencv_find_chessboard, opencv_subpix, refine_by_window, saddle_refine,
@@ -98,9 +98,24 @@ PSF = Refiner("psf", "rotstar", "the symmetric fit, then each corner moved to wh
               correct=psf_correct)
 
 
+def refine_psf_sim(frames, starts, window=10.0) -> np.ndarray:
+    """The symmetric fit on the low-passed frames less its bias simulated through the local PSF (bias_correct)"""
+    frames = np.asarray(frames, np.float32)
+    frames = frames[None] if frames.ndim == 2 else frames
+    w = np.broadcast_to(np.asarray(window, float), (len(np.asarray(starts).reshape(-1, 2)),))
+    q = refine_symmetric(prefilter(frames, lowpass_for(w)), starts, w)
+    return bias_correct(frames, q, w)
+
+
+PSF_SIM = Refiner("psf-sim", "rotstar", "the symmetric fit less its bias under the local PSF: the same fit run on "
+                  "the local star rendered through the Seidel coma that the edges' third moments show "
+                  "(detect.psfbias)", refine_psf_sim, correct=bias_correct, samples=coma_samples)
+
+
 REFINERS = {r.name: r for r in (
     SYMMETRIC,
     PSF,
+    PSF_SIM,
     Refiner("opencv", "checkerboard", "cv2.cornerSubPix (Forstner); on several frames, the mean of each frame's",
             refine_opencv),
     Refiner("saddle", "checkerboard", "Lucchese-Mitra quadratic saddle fit; on several frames, the mean",
@@ -164,6 +179,12 @@ def _rotstar(p: PoseImages) -> Found:
 def _rotstar_psf(p: PoseImages) -> Found:
     r = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale, window=p.window,
                     identity=p.identity, refine=PSF)
+    return Found(r.corners if r.found else None, None, r.error, r.shifts)
+
+
+def _rotstar_psf_sim(p: PoseImages) -> Found:
+    r = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale, window=p.window,
+                    identity=p.identity, refine=PSF_SIM)
     return Found(r.corners if r.found else None, None, r.error, r.shifts)
 
 
@@ -309,6 +330,10 @@ METHODS = {m.name: m for m in (
     Method("rotstar-psf", "rotstar, PSF-aware (centroid of the light)", "rotstar", "own",
            "rotating-star frames, the symmetric fit moved to where the edges' line-spread means meet "
            "(rotstar-detect --refine psf)", _rotstar_psf, demo=False),
+    Method("rotstar-psf-sim", "rotstar, less the bias simulated through the local PSF", "rotstar", "own",
+           "rotating-star frames, the symmetric fit less its offset from the light's centroid, simulated on the "
+           "local star through the coma the edges show (rotstar-detect --refine psf-sim)", _rotstar_psf_sim,
+           demo=False),
 )}
 
 

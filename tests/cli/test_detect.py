@@ -526,7 +526,8 @@ def test_frame_size_read_from_the_pgm_header(tmp_path, size):
 @pytest.mark.slow
 def test_blur_map_and_psf_refine_under_coma(run_cli, tmp_path):
     """--blur-map DIR writes the table and the picture; the widths and coma directions are the lens's;
-    --refine psf brings the corners nearer the light's centroid than the symmetric fit (near views, 2.5 waves)"""
+    --refine psf and psf-sim bring the corners nearer the light's centroid than the symmetric fit (near views,
+    2.5 waves)"""
     from rotstar_mrcal.detect.blurmap import read_table
     from rotstar_mrcal.optics.psf import LensPSF
     from rotstar_mrcal.optics.wavefront import Seidel
@@ -540,7 +541,7 @@ def test_blur_map_and_psf_refine_under_coma(run_cli, tmp_path):
     write_dataset(seq, layout, model, np.array(rts), Settings(bits=16, seed=0), jobs=2, psf=lens)
     truth = {f"pose{i:03d}": simulate.true_corners(model, layout, rt) for i, rt in enumerate(rts)}
     err = {}
-    for refine in ("symmetric", "psf"):
+    for refine in ("symmetric", "psf", "psf-sim"):
         r = run_cli("rotstar-detect", "--refine", refine, "--blur-map", tmp_path / "bm", "-o",
                     tmp_path / f"{refine}.vnl", seq, cwd=tmp_path)
         assert r.returncode == 0, r.stderr
@@ -549,6 +550,7 @@ def test_blur_map_and_psf_refine_under_coma(run_cli, tmp_path):
         err[refine] = np.concatenate([np.linalg.norm(boards[p] - truth[p], axis=-1).ravel() for p in truth])
     rms = {k: float(np.sqrt(np.nanmean(v ** 2))) for k, v in err.items()}
     assert rms["psf"] < 0.7 * rms["symmetric"], rms
+    assert rms["psf-sim"] < 0.4 * rms["symmetric"], rms
     assert (tmp_path / "bm" / "blur_map.png").stat().st_size > 10000
     t = read_table(str(tmp_path / "bm" / "blur_map.csv"))
     assert len(t) > 20

@@ -47,7 +47,7 @@ def test_selections_keep_the_experiments_methods():
     assert method_names(needs="square", demo=True) == ["mrgingham"]
     assert method_names(variants=False) == ["rotstar", "opencv-sb", "opencv-classic", "cornersubpix", "saddle",
                                             "phase", "phase-keep", "star", "mrgingham", "mrgingham-noclahe",
-                                            "rotstar-psf"]
+                                            "rotstar-psf", "rotstar-psf-sim"]
     assert method_names(start="rotstar") == ["cornersubpix", "saddle", "phase", "phase-keep", "star"]
     assert method_names(needs=("phase", "star"), demo=True) == ["phase", "phase-keep", "star"]  # the paper's table
 
@@ -55,7 +55,7 @@ def test_selections_keep_the_experiments_methods():
 def test_unknown_names():
     with pytest.raises(ValueError, match="known: rotstar"):
         methods.method("nonsense")
-    with pytest.raises(ValueError, match="known: symmetric, psf, opencv, saddle"):
+    with pytest.raises(ValueError, match="known: symmetric, psf, psf-sim, opencv, saddle"):
         methods.refiner("nonsense")
     assert methods.description("my-own-set") == ""
 

@@ -22,6 +22,16 @@ projections on 16 directions clipped to the row's reach): the width ratio,
 and the coma direction error where the coma is above 0.5 waves, per corner
 and pooled in 128-px cells.
 
+Methods: the refiners' names (symmetric, psf, psf-sim: detect_pose with
+REFINERS[name]), saddle, and the experiments of bias by simulation
+(detect/psfbias.py) on the symmetric fit's corners with the truth's help:
+simbias-true (the simulator's own kernel at each corner and the true element
+geometry), simbias-nodes-S-N-D (the same at N corners, S sub-pixels per px,
+a field of degree D between), simbias-moments-L (a Gram-Charlier kernel of
+the true kernel's moments clipped to L px, 0: edgespread's reach),
+simbias-est (psf-sim's estimate with the true geometry). --noise 0 renders
+noiseless frames, --no-display-maps leaves the per-frame display maps out.
+
 Printed: per method the RMS of the corner error against the truth, and its
 pose-dependent part: the error minus the mean error of its image cell
 (CELL_PX squares, over all poses; cells with one corner left out), RMS, with
@@ -42,6 +52,7 @@ from rotstar_mrcal import simulate
 from rotstar_mrcal.detect.blurmap import read_table
 from rotstar_mrcal.detect.edgespread import projected_moments, psf_estimate
 from rotstar_mrcal.detect.pipeline import detect_pose
+from rotstar_mrcal.detect.psfbias import bias_correct, coma_samples, simulated_bias, spread_nodes, star_normals
 from rotstar_mrcal.optics.psf import LensPSF
 from rotstar_mrcal.optics.wavefront import Seidel
 from rotstar_mrcal.peers.checkerboard import refine_by_window, saddle_refine
@@ -88,6 +99,170 @@ def pose_dependent(pos, err):
         out += ((e - e.mean(axis=0)) ** 2).sum()
         dof += (len(e) - 1) * 2
     return float(np.sqrt(out / max(dof, 1) * 2))
+
+
+# the Gram-Charlier kernel of a PSF's second and third moments (the experiment simbias-moments-L: with the
+# moments clipped to edgespread's reach the bias is not reproduced, 0.0342 px against 0.0105 unclipped)
+def moment_tensors(es) -> tuple[np.ndarray, np.ndarray]:
+    """(cov (N, 2, 2), kappa (N, 4)) of the PSF from its projections' moments (edgespread.EdgeSpread)
+
+    var(phi) = s0 + s2c cos 2phi + s2s sin 2phi gives the covariance;
+    third(phi) = A cos phi + B sin phi + C cos 3phi + D sin 3phi the third
+    cumulant tensor kappa = (k_xxx, k_xxy, k_xyy, k_yyy), from
+    third(phi) = k_xxx c^3 + 3 k_xxy c^2 s + 3 k_xyy c s^2 + k_yyy s^3.
+    NaN rows where too few edges were measured.
+
+    >>> from rotstar_mrcal.detect.edgespread import projected_moments
+    >>> from rotstar_mrcal.optics.psf import gaussian_psf
+    >>> cov, kappa = moment_tensors(projected_moments(gaussian_psf(1.0, 4), 4, np.arange(16) * np.pi / 16, 6.0))
+    >>> np.round(cov, 2).tolist(), bool(np.abs(kappa).max() < 1e-6)
+    ([[[1.0, 0.0], [0.0, 1.0]]], True)
+    """
+    phi = es.normal
+    c1, s1 = np.cos(phi), np.sin(phi)
+    v = _harmonic(es.var, np.stack((np.ones_like(phi), np.cos(2 * phi), np.sin(2 * phi)), -1))
+    t = _harmonic(es.third, np.stack((c1, s1, np.cos(3 * phi), np.sin(3 * phi)), -1))
+    cov = np.stack((np.stack((v[:, 0] + v[:, 1], v[:, 2]), -1), np.stack((v[:, 2], v[:, 0] - v[:, 1]), -1)), -2)
+    A, B, C, D = t.T
+    kappa = np.stack((A + C, B / 3 + D, A / 3 - C, B - D), -1)
+    return cov, kappa
+
+
+def _harmonic(y, cols):
+    """Least-squares coefficients per row of y (N, E) on cols (N, E, p), NaNs left out (NaN: too few)"""
+    ok = np.isfinite(y) & np.isfinite(cols).all(-1)
+    A = np.where(ok[..., None], cols, 0.0)
+    AtA = np.einsum("nep,neq->npq", A, A)
+    enough = ok.sum(-1) > cols.shape[-1] + 1
+    AtA[~enough] = np.eye(cols.shape[-1])
+    coef = np.linalg.solve(AtA, np.einsum("nep,ne->np", A, np.where(ok, y, 0.0))[..., None])[..., 0]
+    coef[~enough] = np.nan
+    return coef
+
+
+def moment_kernel(cov: np.ndarray, kappa: np.ndarray, s: int, radius: float | None = None) -> np.ndarray:
+    """(N, k, k) kernels at s taps per px with covariance cov (N, 2, 2) and third cumulants kappa (N, 4)
+
+    A Gaussian times 1 + kappa . H3 / 6 (the Gram-Charlier series to third
+    order: mean 0, the covariance and third cumulants given; it may dip
+    below 0 where the skew is strong), sum 1. radius: px (default 5 sigma
+    of the widest).
+
+    >>> k = moment_kernel(np.eye(2)[None] * 1.0, np.array([[0.5, 0.0, 0.0, 0.0]]), 4)
+    >>> x = (np.arange(k.shape[2]) - k.shape[2] // 2) / 4
+    >>> round(float((k[0].sum(0) * x).sum()), 3) + 0.0, round(float((k[0].sum(0) * x ** 3).sum()), 2)
+    (0.0, 0.5)
+    """
+    cov = np.asarray(cov, float)
+    kappa = np.asarray(kappa, float)
+    if radius is None:
+        radius = 5 * float(np.sqrt(np.linalg.eigvalsh(cov)[:, -1].max()))
+    m = int(np.ceil(radius * s))
+    t = np.arange(-m, m + 1) / s
+    x = np.stack(np.broadcast_arrays(t[None, :], t[:, None]), -1)  # (k, k, 2) (x, y)
+    P = np.linalg.inv(cov)  # (N, 2, 2)
+    y = np.einsum("nij,abj->nabi", P, x)  # Sigma^-1 x
+    g = np.exp(-0.5 * np.einsum("nabi,abi->nab", y, x))
+    kxxx, kxxy, kxyy, kyyy = (kappa[:, i, None, None] for i in range(4))
+    y0, y1 = y[..., 0], y[..., 1]
+    p00, p01, p11 = (P[:, i, j, None, None] for i, j in ((0, 0), (0, 1), (1, 1)))
+    h = (kxxx * (y0 ** 3 - 3 * y0 * p00) + 3 * kxxy * (y0 * y0 * y1 - y1 * p00 - 2 * y0 * p01)
+         + 3 * kxyy * (y0 * y1 * y1 - y0 * p11 - 2 * y1 * p01) + kyyy * (y1 ** 3 - 3 * y1 * p11))
+    k = g * (1 + h / 6)
+    return k / k.sum(axis=(1, 2), keepdims=True)
+
+
+def grid_jacobian(corners: np.ndarray, pitch: float) -> np.ndarray:
+    """(ny, nx, 2, 2) camera px per display px from a corner grid (ny, nx, 2), by central differences"""
+    gx = np.gradient(corners, axis=1) / pitch
+    gy = np.gradient(corners, axis=0) / pitch
+    return np.stack((gx, gy), axis=-1)
+
+
+def true_kernels(psf, xy: np.ndarray, s: int = 4, quantum: float = 16.0) -> np.ndarray:
+    if len(xy) == 0:
+        return np.zeros((0, 1, 1))
+    """(N, k, k) the lens's kernels at points xy (N, 2) (positions rounded to `quantum` px), padded to one size"""
+    if not hasattr(psf, "_built"):
+        from rotstar_mrcal.optics.psf import gaussian_psf
+        return np.broadcast_to(gaussian_psf(float(psf), s), (len(xy),) + gaussian_psf(float(psf), s).shape).copy()
+    ks = [psf._built().kernel_at(*(np.round(p / quantum) * quantum), s) for p in xy]
+    m = max(k.shape[0] for k in ks)
+    out = np.zeros((len(ks), m, m))
+    for i, k in enumerate(ks):
+        a = (m - k.shape[0]) // 2
+        out[i, a:a + k.shape[0], a:a + k.shape[1]] = k / k.sum()
+    return out
+
+
+def simbias_nodes(pc, truth, psf, layout, s=2, nodes=9, degree=1) -> np.ndarray:
+    """simbias_true at `nodes` corners spread over the pose (s sub-pixels per px), a smooth field between"""
+    from rotstar_mrcal.detect.edgespread import smooth_field
+    q = pc.corners.copy()
+    j, i = np.nonzero(np.isfinite(q[..., 0]))
+    pick = spread_nodes(q[j, i], nodes)
+    J = grid_jacobian(truth, float(layout.pitch))[j, i][pick]
+    n = star_normals(J, np.array([layout.angle(k) for k in range(layout.nframes)]))
+    b = simulated_bias(true_kernels(psf, q[j, i][pick], s), s, n, q[j, i][pick], pc.window[j, i][pick], pc.prefilter_px)
+    ok = np.isfinite(b).all(axis=1)
+    q[j, i] -= smooth_field(q[j, i][pick][ok], b[ok], degree, at=q[j, i])
+    return q
+
+
+def simbias_true(pc, truth, psf, layout, reach=None) -> np.ndarray:
+    """(ny, nx, 2) the symmetric corners pc less the bias simulated with the TRUE local PSF and geometry
+
+    reach: instead of the true kernels, Gram-Charlier kernels of their moments clipped to +-reach
+    (px; 0: edgespread's reach for the corner's window)
+    """
+    q = pc.corners.copy()
+    j, i = np.nonzero(np.isfinite(q[..., 0]))
+    J = grid_jacobian(truth, float(layout.pitch))[j, i]
+    n = star_normals(J, np.array([layout.angle(k) for k in range(layout.nframes)]))
+    w = pc.window[j, i]
+    k = true_kernels(psf, q[j, i])
+    if reach is not None:
+        L = np.clip(0.45 * w, 2, 5) if reach == 0 else np.full(len(w), float(reach))
+        es = [projected_moments(kk, 4, np.arange(16) * np.pi / 16, r) for kk, r in zip(k, L)]
+        cov, kappa = (np.concatenate(v) for v in zip(*[moment_tensors(e) for e in es]))
+        k = moment_kernel(cov, kappa, 4)
+    b = simulated_bias(k, 4, n, q[j, i], w, pc.prefilter_px)
+    q[j, i] -= b
+    return q
+
+
+def samples_from(model, layout, psf, a, dist, fs, mc):
+    """coma_samples of the poses at distances dist (near, far), the same lens, npose and seed (renders cached)"""
+    tag = (f"g{a.gaussian:g}" if a.gaussian > 0 else f"c{a.coma:g}f{a.focus:g}") + f"-d{dist[0]:g},{dist[1]:g}"
+    xy, vec = [], []
+    for i, rt in enumerate(simulate.random_poses(model, layout, a.npose, np.random.default_rng([3, a.seed]),
+                                                 distance=dist)):
+        rot, _ = render(model, layout, rt, psf, os.path.join(a.cache, f"{tag}-n{a.npose}-s{a.seed}-p{i}.npz"))
+        rng = np.random.default_rng([5, a.seed, i])
+        frames = simulate.expose(rot, gain=0.9, noise=0.01 * a.noise, shot=1e-4 * a.noise, bits=16,
+                                 rng=rng).astype(np.float32)
+        pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
+        jj, ii = np.nonzero(np.isfinite(pc.corners[..., 0]))
+        x, v = coma_samples(frames, pc.corners[jj, ii], pc.window[jj, ii])
+        xy.append(x)
+        vec.append(v)
+    return np.concatenate(xy), np.concatenate(vec)
+
+
+def dataset_correction(poses, acc, extra=None):
+    """psf-sim with the coma pooled over all poses (coma_samples of each, or extra (xy, vec)), appended to acc"""
+    xy = np.concatenate([p[5][0] for p in poses] + ([] if extra is None else [extra[0]]))
+    vec = np.concatenate([p[5][1] for p in poses] + ([] if extra is None else [extra[1]]))
+    print(f"psf-sim-dataset: {len(xy)} corners show the coma", file=sys.stderr)
+    for frames, pc, truth, view, tw, _ in poses:
+        t0 = time.perf_counter()
+        q = pc.corners.copy()
+        jj, ii = np.nonzero(np.isfinite(q[..., 0]))
+        q[jj, ii] = bias_correct(frames, q[jj, ii], pc.window[jj, ii], samples=(xy, vec))
+        e = q - truth
+        ok = view & np.isfinite(e).all(axis=-1) & (np.linalg.norm(e, axis=-1) <= MATCH_PX)
+        for k, v in enumerate((truth[ok], e[ok], time.perf_counter() - t0, tw[ok])):
+            acc[k].append(v)
 
 
 def cpu_time(frames, layout, fs, refine: str, repeats: int = 3) -> float:
@@ -139,13 +314,22 @@ def main(argv=None):
     p.add_argument("--focus", type=float, default=0.3)
     p.add_argument("--gaussian", type=float, default=0.0)
     p.add_argument("--npose", type=int, default=4)
+    p.add_argument("--noise", type=float, default=1.0,
+                   help="scale of the read noise (1 %%) and shot noise (1e-4); 0: noiseless frames, whose "
+                        "pose-dependent error is the methods' own")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--cache", default="/tmp/rotstar-psfcheck")
     p.add_argument("--methods", default="symmetric,psf,saddle")
     p.add_argument("--distance", default="", help="near,far metres (default: random_poses' range)")
+    p.add_argument("--coma-from", metavar="NEAR,FAR",
+                   help="psf-sim-dataset: the coma pooled from the same lens's poses at this distance range "
+                        "(as --distance) instead of these poses")
+    p.add_argument("--no-display-maps", action="store_true",
+                   help="detect_pose(check_motion=False): no per-frame display maps in the joint refinement")
     p.add_argument("--check-blur-map", metavar="CSV", help="compare a blur map with the lens's true PSFs")
     p.add_argument("--timing", action="store_true",
-                   help="also the CPU time of detect_pose per pose, symmetric and psf (the least of 3 runs each)")
+                   help="also the CPU time of detect_pose per pose, symmetric, psf and psf-sim "
+                        "(the least of 3 runs each)")
     a = p.parse_args(argv)
     if a.check_blur_map:
         return check_blur_map(a.check_blur_map, a.coma, a.focus)
@@ -161,7 +345,9 @@ def main(argv=None):
     tag += f"-n{a.npose}"  # random_poses' poses depend on how many
     fs = float(simulate.full_scale_code(16))
     methods = a.methods.split(",")
+    mc = not a.no_display_maps
     acc = {m: ([], [], [], []) for m in methods}  # positions, errors, seconds, true windows
+    later = []  # psf-sim-dataset's poses
     for i, rt in enumerate(rts):
         t0 = time.perf_counter()
         rot, cb = render(model, layout, rt, psf, os.path.join(a.cache, f"{tag}-s{a.seed}-p{i}.npz"))
@@ -171,20 +357,43 @@ def main(argv=None):
         rng = np.random.default_rng([5, a.seed, i])
 
         def expose(img):
-            return simulate.expose(img, gain=0.9, noise=0.01, shot=1e-4, bits=16, rng=rng)
+            return simulate.expose(img, gain=0.9, noise=0.01 * a.noise, shot=1e-4 * a.noise, bits=16, rng=rng)
 
         frames = expose(rot).astype(np.float32)
         if a.timing:
             print(f"pose {i}: CPU s per detection " + ", ".join(
-                f"{m} {cpu_time(frames, layout, fs, m):.2f}" for m in ("symmetric", "psf")))
+                f"{m} {cpu_time(frames, layout, fs, m):.2f}" for m in ("symmetric", "psf", "psf-sim")))
         for m in methods:
             t0 = time.perf_counter()
             if m == "saddle":
                 avg = averaged_captures(cb, expose, 8, lit_box(cb, 0.02))
                 q = refine_by_window(lambda im, x, w: saddle_refine(im, x, win=w), avg,
                                      perturbed_start(truth, a.seed, i), true_windows(model, layout, rt))
+            elif m.startswith("simbias-nodes"):  # simbias-nodes-S-N-D
+                S, NN, D = (int(v) for v in m.split("-")[2:5])
+                q = simbias_nodes(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout,
+                                  S, NN, D)
+            elif m == "simbias-est":  # the estimated PSF, the true geometry and the raw frames
+                pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
+                q = pc.corners.copy()
+                jj, ii = np.nonzero(np.isfinite(q[..., 0]))
+                q[jj, ii] = bias_correct(frames, q[jj, ii], pc.window[jj, ii],
+                                         jac=grid_jacobian(truth, float(layout.pitch))[jj, ii],
+                                         angles=np.array([layout.angle(k) for k in range(layout.nframes)]),
+                                         lowpass_sigma=pc.prefilter_px)
+            elif m == "simbias-true":
+                q = simbias_true(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout)
+            elif m.startswith("simbias-moments"):  # simbias-moments-L: clipped to L px (0: edgespread's reach)
+                q = simbias_true(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout,
+                                 float(m.split("-")[2]))
+            elif m == "psf-sim-dataset":  # the symmetric fit now, the correction once every pose's coma is in
+                pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
+                jj, ii = np.nonzero(np.isfinite(pc.corners[..., 0]))
+                later.append((frames, pc, truth, view, true_windows(model, layout, rt),
+                              coma_samples(frames, pc.corners[jj, ii], pc.window[jj, ii])))
+                continue
             else:
-                q = detect_pose(frames, layout, full_scale=fs, refine=REFINERS[m]).corners
+                q = detect_pose(frames, layout, full_scale=fs, refine=REFINERS[m], check_motion=mc).corners
             dt = time.perf_counter() - t0
             e = q - truth
             ok = view & np.isfinite(e).all(axis=-1) & (np.linalg.norm(e, axis=-1) <= MATCH_PX)
@@ -194,7 +403,12 @@ def main(argv=None):
             acc[m][3].append(true_windows(model, layout, rt)[ok])
         print(f"pose {i}: windows {np.nanpercentile(true_windows(model, layout, rt), [5, 50, 95]).round(1)}",
               file=sys.stderr)
-    print(f"{tag}, {a.npose} poses (seed {a.seed})")
+    if later:
+        extra = None
+        if a.coma_from:
+            extra = samples_from(model, layout, psf, a, tuple(float(v) for v in a.coma_from.split(",")), fs, mc)
+        dataset_correction(later, acc["psf-sim-dataset"], extra)
+    print(f"{tag}, {a.npose} poses (seed {a.seed})" + (f", noise x {a.noise:g}" if a.noise != 1 else ""))
     for m in methods:
         pos, err = np.concatenate(acc[m][0]), np.concatenate(acc[m][1])
         rms = float(np.sqrt((err ** 2).sum(axis=1).mean()))

@@ -1,0 +1,407 @@
+"""Bias by simulation: the symmetric fit's offset from the light's centroid under a known local PSF (issue 24)
+
+SYNOPSIS
+
+    >>> import numpy as np
+    >>> from rotstar_mrcal.detect.psfbias import simulated_bias, star_normals
+    >>> from rotstar_mrcal.optics.psf import gaussian_psf
+    >>> n = star_normals(np.eye(2)[None], np.arange(8) * np.pi / 16)
+    >>> b = simulated_bias(gaussian_psf(1.0, 4)[None], 4, n, np.array([[10.3, 20.6]]), np.array([8.0]), 1.0)
+    >>> bool(np.abs(b).max() < 0.005)          # a symmetric PSF: no bias
+    True
+
+Under a PSF that is not point-symmetric (coma) the symmetric fit (refine.py,
+Eq. 1, on frames low-passed by refine.prefilter) finds the blurred star's
+point of symmetry, not where the light's centroid lands. That offset is a
+deterministic function of the local PSF, of the local pattern (the two edge
+directions of every frame in the image, i.e. the element's Jacobian and the
+frames' angles), of the fit window and of the low-pass; it barely depends on
+the corner's sub-pixel phase. So render the ideal local star through the PSF
+with its centre at a known point (`render_star`; `render_star_fft` is the
+plain reference: the sharp pattern on a sub-pixel grid, convolved with the
+kernel, averaged over each pixel), run the SAME fit on it and read the bias
+(`simulated_bias`); the corner is then the fit's corner less that bias.
+
+The local PSF is not known: `bias_correct` (the refiner psf-sim's step after
+the symmetric fit) takes it as the wavefront PSF of the Seidel coma that the
+edges' third moments show (`pooled_coma`, `local_coma`). With the simulator's
+own PSF in its place the corners land 0.0074 px RMS from the centroid truth,
+with the estimate 0.0106 (4 near D435 poses, 2.5 waves of coma at the image
+corners; the symmetric fit 0.0609): doc/blur-map.md.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from scipy.signal import fftconvolve
+
+from rotstar_mrcal.detect.edgespread import (BIN_PX, MAX_REACH, MIN_REACH, REACH_PER_WINDOW, edge_spread, local_psf,
+                                             smooth_field)
+from rotstar_mrcal.detect.refine import lowpass_for, prefilter, symmetric_refine
+from rotstar_mrcal.optics.psf import Optics, wavefront_psf
+from rotstar_mrcal.optics.wavefront import Seidel
+
+PAD_PX = 2  # px beyond the window and the low-pass's reach in every rendered patch
+
+
+def star_normals(jac: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """(N, K, 2, 2) unit image normals of frame k's two lines at each corner
+
+    jac (N, 2, 2): camera px per display px at the corner; angles (K,): the
+    frames' rotations (Layout.angle), the lines along angle and angle + pi/2.
+
+    >>> np.round(star_normals(np.eye(2)[None], np.array([0.0]))[0, 0], 3)
+    array([[-0.,  1.],
+           [-1.,  0.]])
+    """
+    a = np.asarray(angles, float)
+    t = np.stack((np.stack((np.cos(a), np.sin(a)), -1), np.stack((-np.sin(a), np.cos(a)), -1)), 1)  # (K, 2, 2)
+    d = np.einsum("nij,klj->nkli", np.asarray(jac, float), t)
+    n = np.stack((-d[..., 1], d[..., 0]), -1)
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def render_star_fft(kernels: np.ndarray, s: int, normals: np.ndarray, frac: np.ndarray, half: int) -> np.ndarray:
+    """(N, K, 2 half + 1, 2 half + 1) pixels of the local star through each corner's PSF, by FFT (the reference)
+
+    kernels (N, kh, kw): the PSFs at s sub-pixels per px (odd sizes, centred,
+    sum 1); normals (N, K, 2, 2) from star_normals; frac (N, 2): the corner's
+    position from the patch's centre pixel (its light lands there when the
+    kernel is centred). Values in [-1, 1] (the pattern's two colours).
+    """
+    N, K = normals.shape[:2]
+    kh, kw = kernels.shape[1:]
+    P = 2 * half + 1
+
+    def grid(n, m, f):  # sub-pixel centres, corner-relative, with m extra taps on each side
+        return -half - 0.5 + (np.arange(-m, P * s + m) + 0.5) / s - f[:, None]
+
+    xs, ys = grid(P, kw // 2, frac[:, 0]), grid(P, kh // 2, frac[:, 1])  # (N, Ws), (N, Hs)
+    ramp = (np.abs(normals).sum(-1) / s)[..., None, None]  # (N, K, 2, 1, 1): a sub-pixel's extent along n
+    dist = (normals[..., 0, None, None] * xs[:, None, None, None, :] +
+            normals[..., 1, None, None] * ys[:, None, None, :, None])  # (N, K, 2, Hs, Ws)
+    sharp = np.clip(2 * dist / ramp, -1, 1).prod(axis=2)
+    blurred = fftconvolve(sharp, kernels[:, None], mode="valid", axes=(-2, -1))  # (N, K, P s, P s)
+    return blurred.reshape(N, K, P, s, P, s).mean(axis=(3, 5))
+
+
+BIN_UV = 0.25  # px: the grid the PSF's light is binned on along the two edge normals (render_star)
+TAP_FLOOR = 1e-4  # kernel taps below this fraction of the largest are left out (bias: 0.0013 px RMS, half the time)
+
+
+def render_star(kernels: np.ndarray, s: int, normals: np.ndarray, frac: np.ndarray, half: int) -> np.ndarray:
+    """(N, K, 2 half + 1, 2 half + 1) pixels of the local star through each corner's PSF (as render_star_fft)
+
+    kernels (N, kh, kw): the PSFs at s sub-pixels per px (odd sizes, centred,
+    sum 1); normals (N, K, 2, 2) from star_normals; frac (N, 2): the corner's
+    position from the patch's centre pixel (its light lands there when the
+    kernel is centred). Values in [-1, 1] (the pattern's two colours).
+
+    A checker corner is sign(n1 . x) sign(n2 . x), so a pixel at p sees
+    E[sign(a - U) sign(b - V)] = 1 - 2 P(U > a) - 2 P(V > b) + 4 P(U > a, V > b)
+    with a = n1 . p, b = n2 . p and (U, V) = (n1 . T, n2 . T), T drawn from
+    the PSF convolved with the pixel's box: the light binned on a BIN_UV
+    grid in (U, V) per frame (linear shares), its joint survival function
+    by cumulative sums, read bilinearly at every pixel. On 16 corners
+    with 0.3-2 waves of coma the simulated bias differs from the FFT
+    rendering's by 0.0003 px RMS (of 0.063 px) at half the time with every
+    tap, 0.0013 px with the taps under TAP_FLOOR left out (at a fifth).
+    """
+    N, K = normals.shape[:2]
+    kh, kw = kernels.shape[1:]
+    E = fftconvolve(kernels, np.ones((1, s, s)) / s ** 2, mode="full", axes=(-2, -1))
+    ty = (np.arange(E.shape[1]) - kh // 2 - (s - 1) / 2) / s
+    tx = (np.arange(E.shape[2]) - kw // 2 - (s - 1) / 2) / s
+    E = E.reshape(N, -1)
+    keep = np.abs(E).max(axis=0) > TAP_FLOOR * np.abs(E).max()
+    t = np.stack(np.broadcast_arrays(tx[None, :], ty[:, None]), -1).reshape(-1, 2)[keep]  # (M, 2)
+    m = E[:, keep] * (E.sum(axis=1) / E[:, keep].sum(axis=1))[:, None]  # the light left out spread over the rest
+    R = float(np.linalg.norm(t, axis=1).max()) + 2 * BIN_UV
+    nb = int(np.ceil(2 * R / BIN_UV)) + 2
+    x = (np.einsum("nkli,mi->nklm", normals, t) + R) / BIN_UV  # (N, K, 2, M) in bins
+    i0 = np.floor(x).astype(np.intp)
+    f = x - i0
+    base = (np.arange(N * K) * nb * nb).reshape(N, K, 1)
+    acc = np.zeros(N * K * nb * nb)
+    for du in (0, 1):
+        wu = f[:, :, 0] if du else 1 - f[:, :, 0]
+        for dv in (0, 1):
+            wv = f[:, :, 1] if dv else 1 - f[:, :, 1]
+            idx = base + (i0[:, :, 0] + du) * nb + i0[:, :, 1] + dv
+            acc += np.bincount(idx.ravel(), (m[:, None, :] * wu * wv).ravel(), minlength=N * K * nb * nb)
+    T = np.zeros((N, K, nb + 1, nb + 1))  # T[i, j]: the light of bins >= i along n1 and >= j along n2
+    T[:, :, :nb, :nb] = acc.reshape(N, K, nb, nb)[:, :, ::-1, ::-1].cumsum(2).cumsum(3)[:, :, ::-1, ::-1]
+    o = np.arange(-half, half + 1)
+    px = (o[None, :] - frac[:, 0, None])[:, None, None, None, :]  # (N, 1, 1, 1, P)
+    py = (o[None, :] - frac[:, 1, None])[:, None, None, :, None]
+    a = normals[..., 0, None, None] * px + normals[..., 1, None, None] * py  # (N, K, 2, P, P)
+    xa = np.clip((a + R + BIN_UV / 2) / BIN_UV, 0, nb - 1e-9)
+    j = np.floor(xa).astype(np.intp)
+    g = xa - j
+    n_ = np.arange(N)[:, None, None, None]
+    k_ = np.arange(K)[None, :, None, None]
+    ja, jb, ga, gb = j[:, :, 0], j[:, :, 1], g[:, :, 0], g[:, :, 1]
+
+    def at(ia, ib):
+        return T[n_, k_, ia, ib]
+
+    both = ((1 - ga) * (1 - gb) * at(ja, jb) + ga * (1 - gb) * at(ja + 1, jb) +
+            (1 - ga) * gb * at(ja, jb + 1) + ga * gb * at(ja + 1, jb + 1))
+    pu = (1 - ga) * at(ja, 0) + ga * at(ja + 1, 0)
+    pv = (1 - gb) * at(0, jb) + gb * at(0, jb + 1)
+    return 1 - 2 * pu - 2 * pv + 4 * both
+
+
+def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, chunk: int = 32) -> np.ndarray:
+    """(N, 2) the symmetric fit's corner less the PSF's centre, on the local star rendered through each kernel
+
+    corners (N, 2): where the real corners are (their sub-pixel phase is
+    kept); windows (N,): the fit's half-windows; lowpass_sigma: the Gaussian
+    the frames are low-passed by before the fit (pipeline.prefilter). The
+    patches are tiled into one image per frame and fitted as a pose is: the
+    same offsets, damping and stopping rule. NaN where the fit fails.
+    """
+    q = np.asarray(corners, float)
+    w = np.asarray(windows, float)
+    N = len(q)
+    out = np.full((N, 2), np.nan)
+    if not N:
+        return out
+    half = int(np.ceil(w.max())) + int(math.ceil(4 * lowpass_sigma)) + PAD_PX
+    P = 2 * half + 1
+    frac = q - np.round(q)
+    for a in range(0, N, chunk):
+        sl = slice(a, min(a + chunk, N))
+        patches = render_star(kernels[sl], s, normals[sl], frac[sl], half)
+        n, K = patches.shape[:2]
+        cols = int(math.ceil(math.sqrt(n)))
+        rows = int(math.ceil(n / cols))
+        mosaic = np.zeros((K, rows * P, cols * P), np.float32)
+        r, c = np.divmod(np.arange(n), cols)
+        for i in range(n):
+            mosaic[:, r[i] * P:(r[i] + 1) * P, c[i] * P:(c[i] + 1) * P] = patches[i]
+        at = np.stack((c * P + half + frac[sl, 0], r * P + half + frac[sl, 1]), -1)
+        fit = symmetric_refine(prefilter(mosaic, lowpass_sigma), at, w[sl])
+        out[sl] = fit.corners - at
+    return out
+
+
+# ---------------------------------------------------------------------------
+# the local PSF from the edges' moments: a Seidel wavefront (coma, focus) per region
+# ---------------------------------------------------------------------------
+KERNEL_STEP = 0.1  # waves: the local coma and focus are rounded to this for the kernels that are rendered
+SUPERSAMPLE = 4
+
+
+def seidel_kernel(coma: float, focus: float, angle: float, optics=None, s: int = SUPERSAMPLE) -> np.ndarray:
+    """The wavefront PSF of coma (waves, its tail along `angle`) and focus, its centroid put back by tilt = -coma
+
+    As the simulator's lens (optics.psf.LensPSF); cached on the values rounded to KERNEL_STEP and 1 degree.
+    """
+    r = KERNEL_STEP
+    return _seidel_kernel(round(coma / r) * r, round(focus / r) * r, round(math.degrees(angle)) % 360,
+                          optics or Optics(), s)
+
+
+@functools.lru_cache(maxsize=512)
+def _seidel_kernel(coma, focus, angle_deg, optics, s):
+    a = math.radians(angle_deg)
+    return wavefront_psf(Seidel(tilt=-coma, coma=coma, focus=focus, tilt_angle=a, coma_angle=a), optics, s)
+
+
+TABLE_COMA = np.arange(0.0, 4.01, 0.25)  # waves of local coma in the table of measured third moments
+
+
+@functools.lru_cache(maxsize=64)
+def coma_table(reach: float, optics) -> np.ndarray:
+    """(len(TABLE_COMA),) the third moment edgespread measures (A, px^3) on the local star through each coma
+
+    The star (square pixels, window reach / REACH_PER_WINDOW) rendered
+    through seidel_kernel(coma, 0, 0) and read by local_psf with this
+    reach, as the real corners are: the table carries what the ESF reading
+    does to the moments (the tail beyond the reach, the levels it is
+    normalised by, the pixel box).
+    """
+    normals = star_normals(np.eye(2)[None].repeat(len(TABLE_COMA), 0), np.arange(8) * np.pi / 16)
+    ks = [seidel_kernel(c, 0.0, 0.0, optics) for c in TABLE_COMA]
+    w = reach / REACH_PER_WINDOW
+    half = int(np.ceil(w)) + 2
+    frames = render_star(_padded(ks), SUPERSAMPLE, normals, np.zeros((len(ks), 2)), half)
+    out = np.empty(len(ks))
+    for i, f in enumerate(frames):  # (8, P, P), the corner at the centre pixel
+        e = local_psf(f, np.array([[half, half]], float), w, reach=reach)[1]
+        out[i] = e.coma[0] * np.cos(e.coma_angle[0])
+    out[0] = 0.0
+    return np.maximum.accumulate(out)
+
+
+def local_coma(third: np.ndarray, reach: float, optics=None) -> np.ndarray:
+    """(N,) waves of coma (focus 0) whose measured third moment at this reach is third (N,) (coma_table)
+
+    >>> t = coma_table(2.0, Optics())
+    >>> np.round(local_coma(t[[2, 6]], 2.0), 2).tolist()
+    [0.5, 1.5]
+    """
+    t = coma_table(round(float(reach) / BIN_PX) * BIN_PX, optics or Optics())
+    return np.interp(np.asarray(third, float), t + np.arange(len(t)) * 1e-9, TABLE_COMA)
+
+
+def _turned(v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """vectors v (N, ..., 2) turned by angles a (N,) (radians, from x toward y)"""
+    c, s = (f(a).reshape((-1,) + (1,) * (v.ndim - 2)) for f in (np.cos, np.sin))
+    return np.stack((c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]), -1)
+
+
+def _padded(ks) -> np.ndarray:
+    """(n, m, m) the odd square kernels ks centred in one size"""
+    m = max(k.shape[0] for k in ks)
+    out = np.zeros((len(ks), m, m))
+    for i, k in enumerate(ks):
+        p = (m - k.shape[0]) // 2
+        out[i, p:p + k.shape[0], p:p + k.shape[1]] = k
+    return out
+
+
+def plane_with_sd(xy: np.ndarray, v: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(values (M, 2), sd (M,)) of the least-squares plane through v (N, 2) at points xy (N, 2), read at (M, 2)
+
+    sd: the standard deviation of each component at `at`, from the scatter
+    about the plane (refitted once without the points beyond 3 robust sigmas).
+
+    >>> xy = np.array([[0.0, 0.0], [10, 0], [0, 10], [10, 10], [5, 5]])
+    >>> v, sd = plane_with_sd(xy, np.stack((xy[:, 0] * 0.1, np.ones(5)), -1), np.array([[20.0, 0.0]]))
+    >>> np.round(v, 3).tolist(), bool(sd[0] < 1e-9)
+    ([[2.0, 1.0]], True)
+    """
+    c = xy.mean(axis=0)
+    sc = np.maximum(np.ptp(xy, axis=0) / 2, 1e-9)
+
+    def design(p):
+        return np.column_stack((np.ones(len(p)), (p - c) / sc))
+
+    A, B = design(xy), design(at)
+    keep = np.ones(len(v), bool)
+    for _ in range(2):
+        coef = np.linalg.lstsq(A[keep], v[keep], rcond=None)[0]
+        r = np.linalg.norm(v - A @ coef, axis=1)
+        keep = r <= 3 * 1.4826 * np.median(r[keep]) + 1e-12
+    n = int(keep.sum())
+    s2 = (r[keep] ** 2).sum() / max(2 * (n - 3), 1)
+    lev = np.einsum("mi,ij,mj->m", B, np.linalg.pinv(A[keep].T @ A[keep]), B)
+    return B @ coef, np.sqrt(s2 * lev)
+
+
+def spread_nodes(xy: np.ndarray, n: int) -> np.ndarray:
+    """Indices of n of the points xy (N, 2) spread over them: farthest-point sampling from the most central
+
+    >>> spread_nodes(np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0], [10.0, 0.0]]), 3).tolist()
+    [2, 0, 3]
+    """
+    xy = np.asarray(xy, float)
+    pick = [int(np.argmin(np.linalg.norm(xy - xy.mean(axis=0), axis=1)))]
+    d = np.linalg.norm(xy - xy[pick[0]], axis=1)
+    while len(pick) < min(n, len(xy)):
+        pick.append(int(np.argmax(d)))
+        d = np.minimum(d, np.linalg.norm(xy - xy[pick[-1]], axis=1))
+    return np.array(pick, int)
+
+
+NODES = 12  # corners per pose where the bias is simulated; a smooth field carries it to the others
+DEGREE = 2  # of that field
+COMA_SIGNIFICANCE = 3.0  # a pooled coma below this many standard deviations of its plane is taken as 0
+
+
+def coma_samples(frames, corners, window, shifts=None, min_window: float = 4.0,
+                 optics=None) -> tuple[np.ndarray, np.ndarray]:
+    """(xy (M, 2), coma vectors (M, 2), waves along the tail) of the corners whose edges show it
+
+    Each corner of min_window or more has its edge-spread third moment read
+    (edgespread.local_psf, one reach for the call: 0.45 x the median
+    half-window, at least MIN_REACH, and the corners whose window holds it)
+    and turned into waves of coma (local_coma, focus 0) along its measured
+    direction. Corners with edges missing are left out.
+    """
+    q, w = np.asarray(corners, float).reshape(-1, 2), np.broadcast_to(np.asarray(window, float), (len(corners),))
+    meas = np.isfinite(q).all(axis=1) & (w >= min_window)
+    if not meas.any():
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    L = float(np.floor(np.clip(REACH_PER_WINDOW * np.median(w[meas]), MIN_REACH, MAX_REACH) / BIN_PX) * BIN_PX)
+    meas &= REACH_PER_WINDOW * w >= L - 1e-9
+    _, est = local_psf(frames, q[meas], w[meas], None if shifts is None else np.asarray(shifts, float)[:, meas],
+                       reach=L)
+    good = np.isfinite(est.coma) & (est.edges >= 2 * _nframes(frames) - 2)
+    cw = local_coma(est.coma[good], L, optics)
+    return q[meas][good], cw[:, None] * np.stack((np.cos(est.coma_angle[good]), np.sin(est.coma_angle[good])), -1)
+
+
+def pooled_coma(xy: np.ndarray, vec: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(waves (M,), tail angle (M,)) of the coma at points at (M, 2) from coma_samples' (xy, vec)
+
+    The vectors pooled by a plane over the image (Seidel coma grows linearly
+    with the field radius) and read at `at`; a coma below COMA_SIGNIFICANCE
+    standard deviations of the plane there is 0.
+    """
+    cv, sd = plane_with_sd(xy, vec, at)
+    c = np.hypot(cv[:, 0], cv[:, 1])
+    return np.where(c > COMA_SIGNIFICANCE * sd, c, 0.0), np.arctan2(cv[:, 1], cv[:, 0])
+
+
+def _nframes(frames) -> int:
+    return 1 if np.ndim(frames) == 2 else len(frames)
+
+
+def measured_normals(frames, corners, window, shifts=None) -> np.ndarray:
+    """(N, K, 2, 2) each frame's two edge normals at the corners, as edgespread measures them"""
+    ang = edge_spread(frames, corners, window, shifts, reach=MIN_REACH).normal.reshape(len(corners), -1, 2)
+    return np.stack((np.cos(ang), np.sin(ang)), -1)
+
+
+def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lowpass_sigma: float | None = None,
+                 nodes: int = NODES, degree: int = DEGREE, optics=None, min_window: float = 4.0,
+                 samples: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """(N, 2) the symmetric fit's corners (N, 2) less their simulated bias: the light's centroid
+
+    frames (K, H, W) the raw rotating-star frames the corners were fitted on
+    (low-passed by lowpass_sigma first; None: refine.lowpass_for the
+    windows, as detect_pose), window (N,) the fit's half-windows, shifts
+    (K, N, 2) display offsets or None. The local PSF: pooled_coma at `nodes`
+    corners spread over the pose (spread_nodes), of this pose's coma_samples
+    or of `samples` (xy, vectors) given (e.g. a dataset's). The local pattern: jac
+    (N, 2, 2) camera px per display px with angles (K,) the frames'
+    rotations, or (None) the edge normals measured at the nodes. The bias
+    of the same fit on the local star through that PSF (simulated_bias;
+    the kernel computed with its tail along +x and the pattern turned
+    instead) is carried to every corner by a smooth field of `degree`.
+    Fewer than 2 x the field's terms of corners measured or simulated, or
+    no coma at any node: the corners are returned unchanged; a node without
+    coma has no bias.
+    """
+    q = np.asarray(corners, float).reshape(-1, 2)
+    w = np.broadcast_to(np.asarray(window, float), (len(q),))
+    idx = np.flatnonzero(np.isfinite(q).all(axis=1) & np.isfinite(w))
+    enough = (degree + 1) * (degree + 2)
+    if len(idx) < enough:
+        return q.copy()
+    nd = idx[spread_nodes(q[idx], nodes)]
+    xy, vec = coma_samples(frames, q, w, shifts, min_window, optics) if samples is None else samples
+    if len(xy) < enough:
+        return q.copy()
+    c, a = pooled_coma(xy, vec, q[nd])
+    if not c.any():  # no coma shown: the symmetric fit is where the light's centroid is
+        return q.copy()
+    if jac is not None:
+        normals = star_normals(np.asarray(jac, float)[nd], angles)
+    else:
+        normals = measured_normals(frames, q[nd], w[nd], None if shifts is None else np.asarray(shifts)[:, nd])
+    sigma = lowpass_for(w[idx]) if lowpass_sigma is None else lowpass_sigma
+    kern = _padded([seidel_kernel(ci, 0.0, 0.0, optics) for ci in c])
+    b = _turned(simulated_bias(kern, SUPERSAMPLE, _turned(normals, -a), q[nd], w[nd], sigma), a)
+    b[c == 0] = 0.0  # (the sharp diffraction kernel's own small offsets from the pixel grid are not the lens's)
+    ok = np.isfinite(b).all(axis=1)
+    out = q.copy()
+    if ok.sum() >= enough:
+        out[idx] -= smooth_field(q[nd][ok], b[ok], degree, at=q[idx])
+    return out

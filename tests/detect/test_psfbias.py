@@ -1,0 +1,91 @@
+"""Bias by simulation (detect/psfbias.py): the symmetric fit's offset under coma, found and taken off"""
+
+import numpy as np
+
+from rotstar_mrcal.detect import psfbias
+from rotstar_mrcal.detect.pipeline import PoseCorners
+from rotstar_mrcal.detect.psfbias import (bias_correct, coma_samples, render_star, render_star_fft, seidel_kernel,
+                                         simulated_bias, star_normals)
+from rotstar_mrcal.detect.refine import lowpass_for, prefilter, symmetric_refine
+from rotstar_mrcal.detect.run import correct_with_dataset
+from rotstar_mrcal.optics.psf import centroid_px, gaussian_psf
+from rotstar_mrcal.pattern.layout import make_layout
+from rotstar_mrcal.peers.registry import REFINERS
+
+ANGLES = np.arange(8) * np.pi / 16
+
+
+def star_mosaic(kernel, jac, n=4, half=14, s=4, seed=0):
+    """(frames (8, H, W) of n x n local stars through kernel (by FFT), their centres (n*n, 2)); random phases"""
+    frac = np.random.default_rng(seed).uniform(-0.5, 0.5, (n * n, 2))
+    normals = star_normals(np.broadcast_to(jac, (n * n, 2, 2)), ANGLES)
+    p = render_star_fft(np.broadcast_to(kernel, (n * n,) + kernel.shape), s, normals, frac, half)
+    P = 2 * half + 1
+    frames = np.zeros((8, n * P, n * P), np.float32)
+    centres = np.empty((n * n, 2))
+    for k in range(n * n):
+        r, c = divmod(k, n)
+        frames[:, r * P:(r + 1) * P, c * P:(c + 1) * P] = p[k]
+        centres[k] = (c * P + half + frac[k, 0], r * P + half + frac[k, 1])
+    return frames, centres
+
+
+def test_a_symmetric_psf_leaves_no_bias():
+    jac = np.array([[[1.0, 0.3], [-0.1, 0.8]]] * 3)
+    g = gaussian_psf(1.2, 4)
+    b = simulated_bias(np.broadcast_to(g, (3,) + g.shape), 4, star_normals(jac, ANGLES),
+                       np.array([[5.2, 7.9], [3.0, 3.5], [0.4, 0.1]]), np.array([4.0, 6.0, 8.0]), 1.0)
+    assert np.abs(b).max() < 0.004, b
+
+
+def test_coma_bias_points_against_the_tail_and_is_taken_off():
+    kernel = seidel_kernel(1.5, 0.0, np.radians(30))
+    assert np.linalg.norm(centroid_px(kernel, 4)) < 0.03  # the kernel's centre is where its light's centroid is
+    jac = np.array([[1.0, 0.2], [0.1, 0.9]])
+    frames, truth = star_mosaic(kernel, jac)
+    w = np.full(len(truth), 6.0)
+    q = symmetric_refine(prefilter(frames, lowpass_for(w)), truth + 0.2, w).corners
+    e0 = q - truth
+    assert np.linalg.norm(e0, axis=1).min() > 0.04  # the symmetric fit is off under 1.5 waves of coma ...
+    assert (e0 @ np.array([np.cos(np.radians(30)), np.sin(np.radians(30))]) < 0).all()  # ... toward the head
+    e = bias_correct(frames, q, w) - truth  # the edges' normals measured (the dataset test gives the Jacobians)
+    assert np.sqrt((e ** 2).sum(1).mean()) < 0.25 * np.sqrt((e0 ** 2).sum(1).mean()), (e, e0)
+    e = REFINERS["psf-sim"].refine(frames, truth + 0.2, w) - truth
+    assert np.sqrt((e ** 2).sum(1).mean()) < 0.25 * np.sqrt((e0 ** 2).sum(1).mean()), (e, e0)
+
+
+def test_too_few_corners_are_left_as_they_are():
+    q = np.array([[10.0, 10.0], [np.nan, np.nan]])
+    out = bias_correct(np.zeros((8, 30, 30), np.float32), q, np.array([6.0, 6.0]))
+    assert np.array_equal(out, q, equal_nan=True)
+
+
+def test_the_binned_rendering_is_the_fft_one(monkeypatch):
+    monkeypatch.setattr(psfbias, "TAP_FLOOR", 1e-6)  # every tap: the binning alone (the default drops the far tail)
+
+    rng = np.random.default_rng(1)
+    normals = star_normals(np.eye(2) + rng.normal(0, 0.2, (3, 2, 2)), ANGLES)
+    k = psfbias._padded([seidel_kernel(c, 0.0, 0.0) for c in (0.0, 1.0, 2.0)])
+    frac = rng.uniform(-0.5, 0.5, (3, 2))
+    a, b = render_star(k, 4, normals, frac, 10), render_star_fft(k, 4, normals, frac, 10)
+    assert np.abs(a - b).mean() < 2e-3 and np.abs(a - b).max() < 0.08
+
+
+def test_a_dataset_lends_its_coma_to_a_pose_that_shows_none():
+    """run.correct_with_dataset: the pooled coma corrects a pose whose own edges measured nothing"""
+    frames, truth = star_mosaic(seidel_kernel(1.5, 0.0, np.radians(30)), np.array([[1.0, 0.2], [0.1, 0.9]]))
+    w = np.full(len(truth), 6.0)
+    q = symmetric_refine(prefilter(frames, lowpass_for(w)), truth + 0.2, w).corners
+    layout = make_layout(screen=(800, 600), pitch=30, band=4)  # (the Jacobians' scale does not matter)
+
+    def pose(samples):
+        return PoseCorners(q.reshape(4, 4, 2).copy(), window=w.reshape(4, 4), prefilter_px=lowpass_for(w),
+                           samples=samples, correction=np.zeros((4, 4, 2)))
+
+    seen, blind = pose(coma_samples(frames, q, w)), pose((np.zeros((0, 2)), np.zeros((0, 2))))
+    correct_with_dataset(layout, [seen, blind], REFINERS["psf-sim"])
+    e0 = np.sqrt(((q - truth) ** 2).sum(1).mean())
+    for p in (seen, blind):
+        e = p.corners.reshape(-1, 2) - truth
+        assert np.sqrt((e ** 2).sum(1).mean()) < 0.25 * e0
+        assert np.allclose(p.correction.reshape(-1, 2), p.corners.reshape(-1, 2) - q)
