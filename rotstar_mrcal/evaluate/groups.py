@@ -285,7 +285,7 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
         methods_out.append({**e.summary, "description": description(n), "figures": figs,
                             "models": {s: os.path.relpath(model[n][s], outdir) for s in "AB"},
                             "corners": {"A": os.path.abspath(ca.vnl), "B": os.path.abspath(cb.vnl)},
-                            "glass": _glass_entry(glass.get(n), before, outdir)})
+                            "glass": _glass_entry(glass.get(n), before, plain[n], outdir)})
     return Comparison(
         label=label,
         groups={"A": first_a.seq or first_a.vnl, "B": first_b.seq or first_b.vnl},
@@ -294,10 +294,12 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
         maps=maps, glass=None if glass_mm == 0 else {"mm": glass_mm, "index": glass_index})
 
 
-def _glass_entry(found: dict | None, before: dict, outdir: str) -> dict | None:
-    """A set's "glass" entry: per group what correct_glass found, its corrected model's path (relative to
-    outdir; None when not applied) and the plain model against the truth ("truth_plain", simulated data)"""
+def _glass_entry(found: dict | None, before: dict, plain: dict, outdir: str) -> dict | None:
+    """A set's "glass" entry: per group what correct_glass found, the paths (relative to outdir) of its
+    corrected model (None when not applied) and of the plain one, and the plain model against the truth
+    ("truth_plain", simulated data; None when not corrected: the set's "truth" is the plain model's)"""
     if not found:
         return None
-    return {s: {**g, "model": g["model"] and os.path.relpath(g["model"], outdir), "truth_plain": before.get(s)}
+    return {s: {**g, "model": g["model"] and os.path.relpath(g["model"], outdir),
+                "plain_model": os.path.relpath(plain[s], outdir), "truth_plain": before.get(s)}
             for s, g in found.items()}
