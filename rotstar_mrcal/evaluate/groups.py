@@ -145,7 +145,10 @@ def _calibrate(job):
         return name, side, str(e), None
     if glass_mm == 0:
         return name, side, None, None
-    return name, side, None, glass_correction(model, argv[argv.index("--outdir") + 1], glass_mm, glass_index)
+    try:
+        return name, side, None, glass_correction(model, argv[argv.index("--outdir") + 1], glass_mm, glass_index)
+    except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:  # mrcal's solve refused: the plain model stays
+        return name, side, None, {"error": f"{type(e).__name__}: {e}", "applied": False, "model": None}
 
 
 def glass_correction(model: mrcal.cameramodel, outdir: str, glass_mm: float | None, index: float) -> dict:
@@ -236,7 +239,8 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
                 failed.setdefault(name, []).append(f"{side}: {err}")
             if g is not None:
                 glass.setdefault(name, {})[side] = g
-                log(f"[{name} {side}] {glass_line(g)}")
+                log(f"[{name} {side}] " + (f"cover glass: not corrected: {g['error']}" if "error" in g
+                                           else glass_line(g)))
     for name, errs in failed.items():
         if name in loaded:
             log(f"{name}: calibration failed: " + "; ".join(errs))
@@ -300,6 +304,6 @@ def _glass_entry(found: dict | None, before: dict, plain: dict, outdir: str) -> 
     ("truth_plain", simulated data; None when not corrected: the set's "truth" is the plain model's)"""
     if not found:
         return None
-    return {s: {**g, "model": g["model"] and os.path.relpath(g["model"], outdir),
+    return {s: {**g, "model": g.get("model") and os.path.relpath(g["model"], outdir),
                 "plain_model": os.path.relpath(plain[s], outdir), "truth_plain": before.get(s)}
             for s, g in found.items()}
