@@ -69,9 +69,9 @@ calibration (A and B, every corner set) for a glass the user knows, as
 rotstar-calibrate --glass does (calibrate.glass: each corner moved to where
 the unrefracted pixel would have been seen from its board's solved pose, the
 problem solved again); --glass estimate estimates the thickness from each
-calibration and corrects when it is a plausible glass (over 0 by
-{MIN_SIGMAS:g} sigma, at most {MAX_PLAUSIBLE_MM:g} mm; else the plain model
-stays and the reason is reported). The default is no correction: the
+calibration and corrects when it is a plausible glass (over 0 by {MIN_SIGMAS:g} sigma,
+at most {MAX_PLAUSIBLE_MM:g} mm; else the plain model stays and the reason is
+reported). The default is no correction: the
 calibrations are those of the printed mrcal-calibrate-cameras commands, which
 a user can run again and get the same models. The corrected models are the
 ones tested; results.json keeps, per corner set and group, the glass found
