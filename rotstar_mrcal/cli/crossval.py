@@ -75,8 +75,8 @@ reported). The default is no correction: the
 calibrations are those of the printed mrcal-calibrate-cameras commands, which
 a user can run again and get the same models. The corrected models are the
 ones tested; results.json keeps, per corner set and group, the glass found
-and the plain model against the truth. The held-out corners are tested as
-detected (through the glass).
+and the plain model against the truth. A corrected model's held-out corners
+are corrected for the same glass from their own solved poses.
 """
 
 EPILOG = f"""\

@@ -27,9 +27,9 @@ from each calibration as rotstar-calibrate does and corrects when the
 estimate is a plausible glass (else the plain model stays, with the reason).
 The corrected model (<set>/<group>/glass/camera-0.cameramodel) is then the
 one evaluated; the set's "glass" entry holds, per group, what correct_glass
-found and, on simulated data, the plain model against the truth. The
-held-out corners of the other group are tested as detected (through the
-glass): the held-out error is not corrected.
+found and, on simulated data, the plain model against the truth. A
+corrected model's held-out corners (the other group's) are corrected for
+the same glass from their own solved poses (evaluate.heldout).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ from rotstar_mrcal.evaluate.truth import truth_error, truth_poses_of
 from rotstar_mrcal.calibrate.solve import calibration_argv, focal_seed, resolve_lensmodel
 from rotstar_mrcal.peers.registry import description
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set
-from rotstar_mrcal.optics.refraction import DEFAULT_INDEX
+from rotstar_mrcal.optics.refraction import DEFAULT_INDEX, Glass
 from rotstar_mrcal.simulate.dataset import load_truth
 
 _WORKERS = multiprocessing.get_context("forkserver")
@@ -170,12 +170,15 @@ def _true_camera(seq):
     return None
 
 
-def _evaluate(method, path_a, path_b, test_a, test_b, seq_a, seq_b, gridn, distance, plain=None):
+def _evaluate(method, path_a, path_b, test_a, test_b, seq_a, seq_b, gridn, distance, plain=None, glass=None):
     """Worker: one method's evaluation from its two model files; and {side: the plain model's truth error
-    summary} for the sides whose plain model (plain: {side: path}) was corrected for a cover glass"""
+    summary} for the sides whose plain model (plain: {side: path}) was corrected for a cover glass
+    (glass: {side: its Glass}, what its held-out corners are corrected for)"""
     truth = {"A": _true_camera(seq_a), "B": _true_camera(seq_b)}
+    glass = glass or {}
     e = compare.evaluate(method, mrcal.cameramodel(path_a), mrcal.cameramodel(path_b), test_a, test_b,
-                         truth["A"], truth["B"], gridn_width=gridn, distance=distance)
+                         truth["A"], truth["B"], gridn_width=gridn, distance=distance, glass_a=glass.get("A"),
+                         glass_b=glass.get("B"))
     before = {}
     for side, path in (plain or {}).items():
         t = truth[side]
@@ -250,7 +253,9 @@ def compare_sets(sets: dict, outdir: str, lensmodel: str = "auto", knots_x: int 
     model = {n: {s: glass.get(n, {}).get(s, {}).get("model") or plain[n][s] for s in "AB"} for n in todo}
     args = {n: (n, model[n]["A"], model[n]["B"], loaded[n][0].test_set(), loaded[n][1].test_set(),
                 loaded[n][0].seq, loaded[n][1].seq, gridn, distance,
-                {s: plain[n][s] for s in "AB" if model[n][s] != plain[n][s]}) for n in todo}
+                {s: plain[n][s] for s in "AB" if model[n][s] != plain[n][s]},
+                {s: Glass.mm(g["thickness_mm"], g["index"]) for s, g in glass.get(n, {}).items() if g.get("applied")})
+            for n in todo}
     evals = {}
     if jobs > 1 and len(todo) > 1:
         with cf.ProcessPoolExecutor(min(jobs, len(todo)), mp_context=_WORKERS) as ex:

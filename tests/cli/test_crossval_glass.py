@@ -83,6 +83,9 @@ def test_the_known_glass_is_applied_recorded_and_moves_the_calibration_to_the_tr
         assert os.path.exists(d / "given" / g["model"]) and m["models"][s] == g["model"]
         before, after = g["truth_plain"]["median_px"], m["truth"][s]["median_px"]
         assert after < 0.5 * before, (s, before, after)  # measured: A 0.192 -> 0.0083, B 0.282 -> 0.0205 px
+    for d in ("A->B", "B->A"):  # the held-out corners corrected for the same glass: at the noise floor
+        h, h_plain = m["heldout"][d]["mean_px"], plain["methods"][0]["heldout"][d]["mean_px"]
+        assert h < 0.009 and h < h_plain, (d, h, h_plain)  # 0.005 px noise: 1.25 x 0.005 = 0.0063
     assert "cover glass (index 1.5): 0.700 mm (given); applied" in r.stderr
     assert "| rotstar | A | 0.7 mm given, applied |" in r.stdout  # the glass table after the results table
 

@@ -151,4 +151,4 @@ def test_glass_table_shows_plain_corrected_and_the_estimate():
                        "0.012 / 0.2"]]  # a method without the glass's correction (not calibrated) has no row
     s = glass.summary(res, est)
     assert "0.2 / 0.2 px from the true camera plain, 0.01 / 0.02 px corrected for the known 0.7 mm" in s
-    assert "B: 4.2 +- 0.3 mm, not applied (more than any)" in s
+    assert "B: 4.2 +- 0.3 mm, not applied: more than any" in s

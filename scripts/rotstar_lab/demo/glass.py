@@ -112,8 +112,8 @@ def summary(result: dict, est: dict, method: str = "rotstar") -> str:
     before = [get(m, "glass", s, "truth_plain", "median_px") for s in "AB"]
     after = [get(m, "truth", s, "median_px") for s in "AB"]
     e = est.get(method, {})
-    said = "; ".join(f"{s}: {_estimated(e.get(s))} mm, {'applied' if e[s]['applied'] else 'not applied'} "
-                     f"({e[s]['reason']})" for s in "AB" if s in e)
+    said = "; ".join(f"{s}: {_estimated(e.get(s))} mm, {'applied' if e[s]['applied'] else 'not applied'}: "
+                     f"{e[s]['reason']}" for s in "AB" if s in e)
     return (f"{method} at {result['label']}: {_pair(before)} px from the true camera plain, {_pair(after)} px "
             f"corrected for the known {get(result, 'glass', 'mm'):g} mm (A / B, median over the imager). "
             f"Estimated from the data: {said or '-'}.")
