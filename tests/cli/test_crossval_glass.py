@@ -58,7 +58,8 @@ def glass_sets(tmp_path_factory):
 
 
 def crossval(run_cli, vnls, xdir, *extra) -> dict:
-    r = run_cli("rotstar-crossval", "--set", "rotstar", *vnls, "--lensmodel", "opencv8", "--outdir", xdir,
+    sets = ["--set", "rotstar", *vnls] if vnls else []
+    r = run_cli("rotstar-crossval", *sets, "--lensmodel", "opencv8", "--outdir", xdir,
                 "--gridn", "10", *extra)
     assert r.returncode == 0, r.stderr
     return json.load(open(os.path.join(xdir, "results.json"))), r
@@ -105,3 +106,18 @@ def test_bad_glass_values_give_one_line_and_exit_2(bad, run_cli, tmp_path):
     assert r.returncode == 2 and "Traceback" not in r.stderr
     err = [line for line in r.stderr.splitlines() if "error" in line]
     assert len(err) == 1 and bad[0] in err[0] and bad[1] in err[0], r.stderr
+
+
+def test_the_estimate_is_applied_through_glass_and_leaves_a_clear_screen_unchanged(glass_sets, run_cli, tmp_path):
+    """--glass estimate: one corner set through 0.7 mm, one of the same kind of poses without glass"""
+    clear = [write_group(str(tmp_path / g), seed, 0.0) for g, seed in (("A", 21), ("B", 22))]
+    res, r = crossval(run_cli, [], str(tmp_path / "xval"), "--set", "glass", *glass_sets, "--set", "clear", *clear,
+                      "--glass", "estimate", "--jobs", "2")
+    m = {x["method"]: x for x in res["methods"]}
+    assert res["glass"] == {"mm": None, "index": 1.5}
+    for s in "AB":
+        g = m["glass"]["glass"][s]
+        assert g["applied"] and not g["given"] and abs(g["thickness_mm"] - GLASS_MM) < max(0.1, 2 * g["sigma_mm"])
+        c = m["clear"]["glass"][s]
+        assert not c["applied"] and c["model"] is None and "no glass" in c["reason"], c
+        assert m["clear"]["models"][s] == c["plain_model"] and m["clear"]["glass"][s]["truth_plain"] is None
