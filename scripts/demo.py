@@ -20,7 +20,12 @@ printed before it runs:
    with mrcal-calibrate-cameras, tested both ways (held-out MRE),
    cross-validated (projection diff vs uncertainty) and compared with the
    true camera;
-4. rotstar-report over the three exposures.
+4. rotstar-report over the three exposures;
+5. the screen's cover glass (scene.GLASS_MM, every capture rendered through
+   it): rotstar-crossval --glass corrects every calibration for the known
+   thickness (the models the report tests) and keeps the plain ones' error
+   against the truth; at GLASS_EXPOSURE each plain calibration also
+   estimates the thickness (rotstar_lab.demo.glass): OUT/glass.md.
 
 The pattern is the paper's whole sequence (rotstar-pattern --paper-sequence),
 so the phase-shift and star methods run beside rotstar and the checkerboard
@@ -54,7 +59,7 @@ import sys  # noqa: E402
 import time  # noqa: E402
 
 from rotstar_lab import claims  # noqa: E402
-from rotstar_lab.demo import capture, plots, scene, sets  # noqa: E402
+from rotstar_lab.demo import capture, glass, plots, scene, sets  # noqa: E402
 from rotstar_lab.demo.scene import EXPOSURES, exposure_dir  # noqa: E402
 from rotstar_lab.docblock import rewrite_block  # noqa: E402
 from rotstar_lab.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
@@ -69,6 +74,7 @@ def run(cmd, **kw):
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEFAULT_SEED = 1
+GLASS_EXPOSURE = "4000 us"  # the exposure whose calibrations estimate the cover glass (glass_section)
 
 
 def parse_args(argv=None):
@@ -124,7 +130,7 @@ def crossval_and_report(a, out: str, found: dict, crops: dict) -> tuple[str, str
     for label, _ in scene.EXPOSURES:
         xdir = os.path.join(scene.exposure_dir(out, label), "xval")
         cmd = ["rotstar-crossval", "--lensmodel", scene.LENSMODEL, "--label", label, "--outdir", short_path(xdir),
-               "--jobs", str(a.jobs)]
+               "--jobs", str(a.jobs), "--glass", f"{scene.GLASS_MM:g}", "--glass-index", f"{scene.GLASS_INDEX:g}"]
         for m, v in found[label].items():
             cmd += ["--set", m, short_path(v["A"]), short_path(v["B"])]
         run(cmd, stdout=subprocess.DEVNULL)
@@ -138,6 +144,21 @@ def crossval_and_report(a, out: str, found: dict, crops: dict) -> tuple[str, str
                 + ":Close-ups of one corner near the image corner at the three exposures"]
     run(cmd, stdout=subprocess.PIPE, text=True)  # (its headline, without the claims: read below)
     return rep, add_claims(rep)
+
+
+def glass_section(out: str) -> str:
+    """Step 5: the cover glass at GLASS_EXPOSURE, each plain calibration's thickness estimated
+    (rotstar_lab.demo.glass); Markdown (the table, its caption and rotstar's sentence), also OUT/glass.md"""
+    xdir = os.path.join(exposure_dir(out, GLASS_EXPOSURE), "xval")
+    with open(os.path.join(xdir, "results.json")) as f:
+        res = json.load(f)
+    log(f"estimating the cover glass from each plain calibration at {GLASS_EXPOSURE} (rotstar_lab.demo.glass)")
+    est = glass.estimates(res, xdir, log)
+    t = glass.table(res, est)
+    text = f"{t.markdown()}\n\n*{t.caption}*\n\n{glass.summary(res, est)}\n"
+    with open(os.path.join(out, "glass.md"), "w") as f:
+        f.write(text)
+    return text
 
 
 def add_claims(rep: str) -> str:
@@ -156,11 +177,12 @@ def add_claims(rep: str) -> str:
         return f.read()
 
 
-def write_docs(headline: str, rep: str, seconds: float) -> None:
+def write_docs(headline: str, rep: str, seconds: float, glass_md: str) -> None:
     """The headline table into the marked blocks of README.md and doc/validation.md; the report's verdicts
     and the paper's claims in short into README.md (demo:claims), whole with the table by tilt (the report's paper.md) into
     doc/validation.md (demo:paper); the report's figure against the truth as doc/img/demo-vs-truth.png; the run's
-    wall time (seconds) and cores into README.md (demo:time)"""
+    wall time (seconds) and cores into README.md (demo:time); the cover glass's table (glass_section) into
+    README.md and doc/simulator.md (demo:glass)"""
     lines = headline.splitlines()
     table = "\n".join(line for line in lines if line.startswith("|"))
     claims = "\n".join([line for line in lines if line.startswith("- ")] + [""]
@@ -170,7 +192,9 @@ def write_docs(headline: str, rep: str, seconds: float) -> None:
     readme, validation = os.path.join(ROOT, "README.md"), os.path.join(ROOT, "doc", "validation.md")
     for path, name, text in ((readme, "demo:headline", table), (validation, "demo:headline", table),
                              (readme, "demo:claims", claims), (validation, "demo:paper", paper),
-                             (readme, "demo:time", wall_time_note(seconds, os.cpu_count() or 1))):
+                             (readme, "demo:time", wall_time_note(seconds, os.cpu_count() or 1)),
+                             (readme, "demo:glass", glass_md),
+                             (os.path.join(ROOT, "doc", "simulator.md"), "demo:glass", glass_md)):
         if rewrite_block(path, name, text):
             log(f"rewrote the block {name} of {os.path.relpath(path)}")
     fig = os.path.join(ROOT, "doc", "img", "demo-vs-truth.png")  # README's figure: the report's, redrawn
@@ -190,13 +214,16 @@ def main(argv=None) -> int:
         shutil.rmtree(exposure_dir(out, k), ignore_errors=True)
     found, crops = corner_sets(a, out)
     rep, headline = crossval_and_report(a, out, found, crops)
+    glass_md = glass_section(out)
     print()
     print(f"rotstar-mrcal demo ({time.monotonic() - t0:.0f} s): report {os.path.join(rep, 'index.html')} "
           f"(also index.md)")
     print()
     print(headline.rstrip())
+    print()
+    print(glass_md.rstrip())
     if not (a.no_docs or a.quick or a.seed != DEFAULT_SEED):
-        write_docs(headline, rep, clock.elapsed())
+        write_docs(headline, rep, clock.elapsed(), glass_md)
     clock.finish()
     return 0
 

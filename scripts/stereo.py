@@ -35,7 +35,9 @@ The chain, each command printed (stderr) before it runs:
    without noise and with the method's own corner noise (its corners
    against the true ones, RMS per coordinate); and the glass: the thickness
    each calibration estimated, and the plain joint solve (before the
-   correction) against the truth beside the written one;
+   correction) against the truth beside the written one and beside it
+   corrected for the known thickness (what rotstar-calibrate --glass MM
+   writes: calibrate.glass.correct_glass on the same solve);
 6. OUT/stereo/results.json (rotstar-stereo/1) and rotstar-report over it
    (OUT/report/index.html).
 
@@ -67,6 +69,7 @@ from rotstar_lab.benchmark.glass import observed_corners  # noqa: E402
 from rotstar_lab.benchmark.glassrender import same_noise_reference, true_grids  # noqa: E402
 from rotstar_lab.docblock import rewrite_block  # noqa: E402
 from rotstar_lab.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
+from rotstar_mrcal.calibrate.glass import correct_glass  # noqa: E402
 from rotstar_mrcal.calibrate.rig import camera_of  # noqa: E402
 from rotstar_mrcal.evaluate import depth, stereo  # noqa: E402
 from rotstar_mrcal.evaluate.stereo import pose_of_path  # noqa: E402
@@ -176,8 +179,10 @@ def corner_rms(vnls, truth, glass_mm: float = 0.0) -> float:
 
 def glass_effect(files: list, truth, glass_mm: float) -> dict:
     """What rotstar-calibrate found about the glass in one calibration (its calibration.json); the plain joint
-    solve before the correction (candidates/rig/) and its same-noise reference (the glass-free solve with the
-    calibration's own corner errors, rotstar_lab.benchmark.glassrender) against the truth"""
+    solve before the correction (candidates/rig/), it corrected for the known glass_mm ("known": what
+    rotstar-calibrate --glass MM writes, calibrate.glass.correct_glass on the same solve) and its same-noise
+    reference (the glass-free solve with the calibration's own corner errors, rotstar_lab.benchmark.glassrender)
+    against the truth"""
     cdir = os.path.dirname(files[0])
     with open(os.path.join(cdir, "calibration.json")) as f:
         g = json.load(f).get("glass") or {}
@@ -187,9 +192,12 @@ def glass_effect(files: list, truth, glass_mm: float) -> dict:
            for p, rt in truth.rt_ref_board.items() for k, m in enumerate(truth.models)}
     ref, _ = same_noise_reference(oi, *true_grids(truth.models, truth.layout, rts, Glass.mm(glass_mm), oi))
     reference = [mrcal.cameramodel(optimization_inputs=ref, icam_intrinsics=k) for k in range(len(plain))]
+    known = correct_glass(plain[0], glass_mm).models(plain) if glass_mm else None  # rotstar-calibrate --glass MM
     return {**{k: g.get(k) for k in ("thickness_mm", "sigma_mm", "applied", "reason")},
             "plain": stereo.pair_truth_error(plain, truth.models[:2], truth.rt_ref_board),
-            "reference": stereo.pair_truth_error(reference, truth.models[:2], truth.rt_ref_board)}
+            "reference": stereo.pair_truth_error(reference, truth.models[:2], truth.rt_ref_board),
+            "known": known and {"thickness_mm": glass_mm,
+                                **stereo.pair_truth_error(known, truth.models[:2], truth.rt_ref_board)}}
 
 
 def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
@@ -223,7 +231,8 @@ def evaluate(a, out: str, seq: str, cals: dict, vnls: dict) -> dict:
              "its centroid on the chief ray; the right imager's x0.9, the colour camera's x1.1). "
              + (f"The screen's pixels lie under {a.glass:g} mm of cover glass (index 1.5; rotstar-simulate --glass): "
                 "every ray is refracted on its way to them, and rotstar-calibrate estimates the thickness and "
-                "takes it out. " if a.glass else "The screen has no cover glass. ") +
+                "takes it out when the estimate is a plausible glass; the known thickness (rotstar-calibrate "
+                f"--glass {a.glass:g}) is applied beside it. " if a.glass else "The screen has no cover glass. ") +
              f"{a.poses} board poses (iPad, 14 x 9 corners, 0.3-0.6 m) split into groups A ({nA} poses) and "
              f"B ({nB}); each group calibrated jointly with mrcal ({LENSMODEL}) from rotstar's corners and from "
              "the saddle fit's (the best checkerboard detector of the demo) of the same poses. Held-out boards "

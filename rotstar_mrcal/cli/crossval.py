@@ -23,11 +23,13 @@ from rotstar_mrcal.report import crossval as crossval_report
 from rotstar_mrcal.evaluate.heldout import heldout
 from rotstar_mrcal.calibrate.cornerset import SourceError, load_corner_set, load_model
 from rotstar_mrcal.cli.detect import DETECT_METHODS
+from rotstar_mrcal.calibrate.glass import MAX_PLAUSIBLE_MM, MIN_SIGMAS
 from rotstar_mrcal.cli.common import (
-    HelpFormatter, Progress, exit_status_help, atomic_write, make_folder, run, say,
+    HelpFormatter, Progress, exit_status_help, atomic_write, make_folder, number_arg, run, say,
 )
+from rotstar_mrcal.optics.refraction import DEFAULT_INDEX
 
-DESCRIPTION = """\
+DESCRIPTION = f"""\
 Validate calibrations the way the rotating-star paper and mrcal do it.
 
   rotstar-crossval MODEL TEST
@@ -59,6 +61,22 @@ one or more such folders into a report.
 
 The lens model defaults to rotstar-calibrate's lean model
 (LENSMODEL_OPENCV8, the model of rotstar-detect's printed command).
+
+A screen's cover glass bends every ray by an amount that changes with the
+viewing angle, and a plain calibration puts that into the lens model; it is
+the screen's, so it is in every method's corners. --glass MM corrects each
+calibration (A and B, every corner set) for a glass the user knows, as
+rotstar-calibrate --glass does (calibrate.glass: each corner moved to where
+the unrefracted pixel would have been seen from its board's solved pose, the
+problem solved again); --glass estimate estimates the thickness from each
+calibration and corrects when it is a plausible glass (over 0 by {MIN_SIGMAS:g} sigma,
+at most {MAX_PLAUSIBLE_MM:g} mm; else the plain model stays and the reason is
+reported). The default is no correction: the
+calibrations are those of the printed mrcal-calibrate-cameras commands, which
+a user can run again and get the same models. The corrected models are the
+ones tested; results.json keeps, per corner set and group, the glass found
+and the plain model against the truth. A corrected model's held-out corners
+are corrected for the same glass from their own solved poses.
 """
 
 EPILOG = f"""\
@@ -70,6 +88,7 @@ examples:
   rotstar-crossval groupA/ groupB/ --lensmodel opencv8 --outdir xval/
   rotstar-crossval groupA/ groupB/ --methods all --outdir xval/ --label "4000 us"
   rotstar-crossval --set rotstar A/rotstar.vnl B/rotstar.vnl --set mrgingham A/mrg.vnl B/mrg.vnl
+  rotstar-crossval groupA/ groupB/ --methods all --outdir xval/ --glass 0.7   # the screen's known cover glass
 
 """ + exit_status_help("done", failed="some corner set could not be calibrated (the others are reported)",
                        bad="a missing or unreadable model, a model of another imager size than the test "
@@ -96,9 +115,23 @@ def parse_args(argv=None):
     p.add_argument("--distance", type=float,
                    help="compare projections at this range, metres (default: infinity, as mrcal)")
     p.add_argument("--gridn", type=int, default=40, help="grid points across the imager (default 40)")
+    p.add_argument("--glass", type=glass_arg, default=0.0, metavar="MM|estimate",
+                   help="the screen's cover glass over its pixels, mm (0-5), or 'estimate' (see above; default 0: "
+                        "no correction)")
+    p.add_argument("--glass-index", type=number_arg(float, 1), default=DEFAULT_INDEX, metavar="N",
+                   help=f"refractive index of the cover glass (>= 1; default {DEFAULT_INDEX})")
     p.add_argument("--jobs", "-j", type=int, default=1, help="parallel calibrations and evaluations")
     p.add_argument("--json", action="store_true", help="print the results as JSON instead of a table")
     return p.parse_args(argv)
+
+
+def glass_arg(s: str) -> float | None:
+    """argparse type of --glass: a thickness in [0, 5] mm, or 'estimate' (None: calibrate.glass estimates it)
+
+        >>> glass_arg("0.7"), glass_arg("estimate")
+        (0.7, None)
+    """
+    return None if s == "estimate" else number_arg(float, 0, 5)(s)
 
 
 def _kind(path: str) -> str:
@@ -212,7 +245,7 @@ def mode_sets(a, sets: dict) -> int:
     progress = Progress(3 * len(sets))  # two calibrations and one evaluation per set
     c = compare_sets(sets, a.outdir, a.lensmodel, a.knots_x, a.pattern, a.imagersize, a.gridn, a.distance, a.jobs,
                      a.label, log=lambda s: say(s if s.startswith("[") else f"rotstar-crossval: {s}"),
-                     progress=progress.step)
+                     progress=progress.step, glass_mm=a.glass, glass_index=a.glass_index)
     crossval_report.draw(c, a.outdir)
     _write_json(c.to_json(), os.path.join(a.outdir, "results.json"))
     say(f"rotstar-crossval: wrote {os.path.join(a.outdir, 'results.json')}")
@@ -220,6 +253,8 @@ def mode_sets(a, sets: dict) -> int:
         _write_json(c.to_json())
     else:
         print(crossval_report.markdown(c))
+        if c.glass is not None:
+            print("\n" + crossval_report.glass_markdown(c))
     return 0 if c.failed < c.sets else 1  # a set that cannot be calibrated is a result too
 
 

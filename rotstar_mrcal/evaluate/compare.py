@@ -38,6 +38,7 @@ from rotstar_mrcal.evaluate.crossval import CrossVal, cross_validate
 from rotstar_mrcal.evaluate.heldout import HeldOut, heldout
 from rotstar_mrcal.evaluate.tilts import tilts_of
 from rotstar_mrcal.evaluate.truth import TruthError, truth_error, truth_poses_of
+from rotstar_mrcal.optics.refraction import Glass
 
 
 @dataclasses.dataclass
@@ -66,12 +67,17 @@ def _heldout_summary(h: HeldOut, test: TestSet, truth: TrueCamera | None) -> dic
 
 def evaluate(method: str, model_a: mrcal.cameramodel, model_b: mrcal.cameramodel, test_a: TestSet,
              test_b: TestSet, truth_a: TrueCamera | None = None, truth_b: TrueCamera | None = None,
-             gridn_width: int = 40, distance: float | None = None) -> Evaluation:
-    """All validation numbers of the calibrations A and B of one corner set"""
+             gridn_width: int = 40, distance: float | None = None, glass_a: Glass | None = None,
+             glass_b: Glass | None = None) -> Evaluation:
+    """All validation numbers of the calibrations A and B of one corner set
+
+    glass_a, glass_b: the screen's cover glass each model was corrected for (calibrate.glass; None: not
+    corrected); the held-out corners it is tested on are corrected for the same (evaluate.heldout).
+    """
     held = {}
-    for key, model, test in (("A->B", model_a, test_b), ("B->A", model_b, test_a)):
+    for key, model, test, glass in (("A->B", model_a, test_b, glass_a), ("B->A", model_b, test_a, glass_b)):
         warp = model.optimization_inputs().get("calobject_warp")
-        held[key] = heldout(model, test.corners, test.spacing, calobject_warp=warp)
+        held[key] = heldout(model, test.corners, test.spacing, calobject_warp=warp, glass=glass)
     try:
         cv = cross_validate(model_a, model_b, gridn_width=gridn_width, distance=distance)
         cv_summary = cv.summary()

@@ -37,6 +37,14 @@ different detectors on the same test poses, knowing that a noisier test
 detector raises its own floor.
 
 Boards with fewer than MIN_POINTS corners are not solved (NaN).
+
+Through a screen's cover glass (glass: the one the model was corrected for,
+calibrate.glass), the test corners are corrected as the calibration's were:
+each moved to where the unrefracted pixel would have been seen from its
+board's solved pose (calibrate.glass.observation_shift), the poses solved
+again (SOLVES times in all), and the errors measured against the corrected
+corners. Without it, a model corrected for the glass is tested on corners
+that still carry it.
 """
 
 from __future__ import annotations
@@ -45,6 +53,9 @@ import dataclasses
 
 import mrcal
 import numpy as np
+
+from rotstar_mrcal.calibrate.glass import SOLVES, observation_shift
+from rotstar_mrcal.optics.refraction import Glass
 
 MIN_POINTS = 6
 
@@ -94,7 +105,8 @@ def mrcal_observations(corners, weights=None) -> np.ndarray:
     return np.concatenate((np.where(ok[..., None], c, 0.0), np.where(ok, w, -1.0)[..., None]), axis=-1)
 
 
-def heldout(model: mrcal.cameramodel, corners, spacing: float, calobject_warp=None, weights=None) -> HeldOut:
+def heldout(model: mrcal.cameramodel, corners, spacing: float, calobject_warp=None, weights=None,
+            glass: Glass | None = None) -> HeldOut:
     """Solve each board of `corners` with `model`'s intrinsics fixed; see the module doc
 
     corners: (N, ny, nx, 2), mrcal order (record j*nx+i is board point (i,
@@ -102,6 +114,7 @@ def heldout(model: mrcal.cameramodel, corners, spacing: float, calobject_warp=No
     (mrcal's 2 numbers; None = flat), normally the one the model's own
     calibration solved for the same physical board. weights: optional (N,
     ny, nx) weights for the pose fit (the errors are reported unweighted).
+    glass: the screen's cover glass the model was corrected for (module doc).
     """
     corners = np.asarray(corners, float)
     N, ny, nx = corners.shape[:3]
@@ -137,9 +150,14 @@ def heldout(model: mrcal.cameramodel, corners, spacing: float, calobject_warp=No
         do_apply_outlier_rejection=False,
     )
     mrcal.optimize(**oi)
+    shift = np.zeros(o.shape[:-1] + (2,))
+    for _ in range(SOLVES if glass is not None and not glass.none else 0):
+        shift = observation_shift(oi, glass)
+        oi["observations_board"] = np.concatenate((o[..., :2] + shift, o[..., 2:]), axis=-1)
+        mrcal.optimize(**oi)
     obj = mrcal.ref_calibration_object(nx, ny, spacing, calobject_warp=warp)
     q = mrcal.project(mrcal.transform_point_rt(oi["rt_ref_frame"][:, None, None, :], obj), lensmodel, intrinsics)
-    e = np.linalg.norm(q - corners[use], axis=-1)
+    e = np.linalg.norm(q - (corners[use] + shift), axis=-1)
     errors[use] = np.where(o[..., 2] > 0, e, np.nan)
     rt[use] = oi["rt_ref_frame"]
     return HeldOut(errors, rt)

@@ -124,7 +124,37 @@ def verdicts(result) -> list[str]:
     if depth:
         out.append(f"Depth RMS error at {far} m, from the calibration alone (worse of A and B): "
                    + ", ".join(depth) + ".")
-    return out
+    return out + [v for m in result["methods"] for v in [glass_verdict(m)] if v]
+
+
+def glass_verdict(m: dict) -> str:
+    """One sentence on a method's cover glass: the estimates, and the worst baseline and rotation errors of the
+    plain solve, the written calibration and the one corrected for the known thickness ('' without a glass entry)
+
+        >>> ext = lambda db, dr: {"extrinsics": {"baseline_error_mm": db, "rotation_error_deg": dr}}
+        >>> m = {"method": "rotstar", "truth": {"A": ext(0.03, 0.004)},
+        ...      "glass": {"A": {"thickness_mm": 4.1, "sigma_mm": 0.2, "applied": False, "plain": ext(0.03, 0.004),
+        ...                      "known": {"thickness_mm": 0.7, **ext(0.002, 0.001)}}}}
+        >>> print(glass_verdict(m))
+        rotstar, cover glass: estimated 4.1 +- 0.2 mm (A, not applied); baseline / rotation error (worst of A and B): plain 0.03 mm / 0.004 deg, written 0.03 mm / 0.004 deg, corrected for the known 0.7 mm 0.002 mm / 0.001 deg.
+    """
+    gl = m.get("glass") or {}
+    if not gl:
+        return ""
+    gs = sorted(gl)
+
+    def worst(src):
+        return (f"{fmt(_worst([get(src(g), 'extrinsics', 'baseline_error_mm') for g in gs]), 2)} mm / "
+                f"{fmt(_worst([get(src(g), 'extrinsics', 'rotation_error_deg') for g in gs]), 2)} deg")
+
+    est = ", ".join(f"{fmt(get(gl, g, 'thickness_mm'), 3)} +- {fmt(get(gl, g, 'sigma_mm'), 2)} mm "
+                    f"({g}, {'applied' if get(gl, g, 'applied') else 'not applied'})" for g in gs)
+    out = (f"{m['method']}, cover glass: estimated {est}; baseline / rotation error (worst of A and B): "
+           f"plain {worst(lambda g: get(gl, g, 'plain'))}, written {worst(lambda g: get(m, 'truth', g))}")
+    known = get(gl, gs[0], "known", "thickness_mm")
+    if known is not None:
+        out += f", corrected for the known {known:g} mm {worst(lambda g: get(gl, g, 'known'))}"
+    return out + "."
 
 
 def depth_table(result, key: str = "depth") -> Table:
@@ -206,7 +236,8 @@ def _arrow(a, b, c=None, digits: int = 3) -> str:
 
 
 def glass_table(result) -> Table:
-    """Per method and group: the cover glass estimated, and the pair against the truth before -> after the correction
+    """Per method and group: the cover glass estimated, and the pair against the truth before -> after the correction;
+    and, when the run has it ("known"), the same pair corrected for the known thickness, in a row of its own
 
         >>> cam = lambda px: {"median_px": px}
         >>> ext = lambda db, dr: {"baseline_error_mm": db, "rotation_error_deg": dr}
@@ -219,28 +250,41 @@ def glass_table(result) -> Table:
         >>> m["glass"]["A"]["reference"] = m["truth"]["A"]
         >>> glass_table({"glass_mm": 0.7, "methods": [m]}).rows[-1][3:5]
         ['0.1 -> 0.01 (0.01)', '0.2 -> 0.02 (0.02)']
+        >>> m["glass"]["A"]["known"] = {"thickness_mm": 0.7, "cameras": [cam(0.011), cam(0.021)],
+        ...                             "extrinsics": ext(0.002, 0.0006)}
+        >>> glass_table({"glass_mm": 0.7, "methods": [m]}).rows[-1]
+        ['', 'A', '0.700 mm known, applied', '0.1 -> 0.011 (0.01)', '0.2 -> 0.021 (0.02)', '0.02 -> 0.002 (0.001)', '0.008 -> 0.0006 (0.0005)']
     """
-    header = ["method", "group", "glass estimated", "camera 0 vs truth, px", "camera 1 vs truth, px",
+    header = ["method", "group", "glass", "camera 0 vs truth, px", "camera 1 vs truth, px",
               "baseline error, mm", "rotation error, deg"]
     rows = []
     for m in result["methods"]:
         for g in _groups(m):
             e = get(m, "glass", g) or {}
-            p, t, f = {g: e.get("plain")}, m.get("truth"), {g: e.get("reference")}
             est = ("-" if e.get("thickness_mm") is None else
                    f"{e['thickness_mm']:.3f} +- {e['sigma_mm']:.3f} mm" if e.get("sigma_mm") is not None else
                    f"{e['thickness_mm']:.3f} mm")
             est += ", applied" if e.get("applied") else f", not applied: {e.get('reason', '')}"
             rows.append([m["method"] if not rows or rows[-1][0] != m["method"] else "", g, est,
-                         *[_arrow(_camera(p, g, k), _camera(t, g, k), _camera(f, g, k)) for k in (0, 1)],
-                         *[_arrow(get(p, g, "extrinsics", q), get(t, g, "extrinsics", q), get(f, g, "extrinsics", q))
-                           for q in ("baseline_error_mm", "rotation_error_deg")]])
+                         *_glass_cells(e.get("plain"), get(m, "truth", g), e.get("reference"))])
+            if e.get("known"):
+                rows.append(["", g, f"{e['known']['thickness_mm']:.3f} mm known, applied",
+                             *_glass_cells(e.get("plain"), e["known"], e.get("reference"))])
     cap = (f"The screen's cover glass ({result.get('glass_mm', 0):g} mm, index 1.5): the thickness rotstar-calibrate "
            "estimated from each calibration, and each camera (median over its imager, at infinity) and camera 1's "
            "pose against the truth, plain (the joint mrcal solve before the correction) -> written (corrected when "
-           "applied), and in brackets the same-noise reference on simulated data: the glass-free solve with the "
-           "calibration's own corner errors, what a perfect correction would give.")
+           "applied); in the 'known' rows the same solve corrected for the known thickness instead (what "
+           "rotstar-calibrate --glass MM writes); in brackets the same-noise reference on simulated data: the "
+           "glass-free solve with the calibration's own corner errors, what a perfect correction would give.")
     return Table(header, rows, cap)
+
+
+def _glass_cells(plain: dict | None, after: dict | None, reference: dict | None) -> list[str]:
+    """plain -> after (reference) for camera 0, camera 1, the baseline and the rotation; each a pair's truth error"""
+    p, t, f = {"g": plain}, {"g": after}, {"g": reference}
+    return [*[_arrow(_camera(p, "g", k), _camera(t, "g", k), _camera(f, "g", k)) for k in (0, 1)],
+            *[_arrow(get(p, "g", "extrinsics", q), get(t, "g", "extrinsics", q), get(f, "g", "extrinsics", q))
+              for q in ("baseline_error_mm", "rotation_error_deg")]]
 
 
 def tables(result) -> list[tuple[str, Table]]:

@@ -7,6 +7,7 @@ import os
 import numpy as np
 
 from rotstar_mrcal import dataset, simulate
+from rotstar_lab.benchmark.glass import observed_corners
 from rotstar_lab.demo import plots, scene, sets
 from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.simulate.dataset import load_truth
@@ -59,6 +60,11 @@ def test_exposure_figure(tmp_path):
     assert os.path.getsize(fn) > 1000
 
 
+def seen_through_the_glass(model, layout, rt) -> np.ndarray:
+    """Where the board's corners are seen through the demo screen's cover glass (scene.screen_glass)"""
+    return observed_corners(model, layout, rt[None], scene.screen_glass())[0]
+
+
 def test_capture_pose_uses_every_frame_of_the_sequence(tmp_path):
     """One demo pose on a small screen: the rendered frames split by kind (8 rotating-star, 10 identity, the
     checkerboard), every method finds the board near the truth, and --keep-images writes every frame"""
@@ -73,7 +79,9 @@ def test_capture_pose_uses_every_frame_of_the_sequence(tmp_path):
         r = capture.capture_pose(capture.Job("A", 0, rt, rt, 1, str(tmp_path), True, ("rotstar", "saddle")))
     finally:
         capture._W.clear()
-    truth = simulate.true_corners(model, layout, rt)
+    emitting = simulate.true_corners(model, layout, rt)
+    truth = seen_through_the_glass(model, layout, rt)
+    assert np.abs(truth - emitting).max() > 0.3  # the demo's screen is under glass: this pose sees it
     for label, found in r.found.items():
         for m, (corners, _, why) in found.items():
             assert corners is not None, (label, m, why)
@@ -101,7 +109,7 @@ def test_capture_pose_with_the_paper_sequence(tmp_path):
                                              ("rotstar", "phase", "phase-keep", "star")))
     finally:
         capture._W.clear()
-    truth = simulate.true_corners(model, layout, rt)
+    truth = seen_through_the_glass(model, layout, rt)
     for label, found in r.found.items():
         for m in ("rotstar", "phase-keep", "star") + (("phase",) if "saturated" not in label else ()):
             corners, _, why = found[m]
@@ -116,7 +124,31 @@ def test_capture_pose_with_the_paper_sequence(tmp_path):
 def test_docs_have_the_demos_paper_blocks():
     """scripts/demo.py writes the paper's claims into README.md and the whole section into doc/validation.md"""
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    for path, name in (("README.md", "demo:claims"), ("doc/validation.md", "demo:paper")):
+    for path, name in (("README.md", "demo:claims"), ("doc/validation.md", "demo:paper"), ("README.md", "demo:glass"),
+                       ("doc/simulator.md", "demo:glass")):
         with open(os.path.join(root, path)) as f:
             text = f.read()
         assert text.count(f"<!-- {name}:begin -->") == 1 and text.count(f"<!-- {name}:end -->") == 1, (path, name)
+
+
+def test_glass_table_shows_plain_corrected_and_the_estimate():
+    """rotstar_lab.demo.glass: a rotstar-crossval --glass result's methods, plain -> corrected, and the estimates"""
+    from rotstar_lab.demo import glass
+
+    def truth(px):
+        return {"median_px": px, "max_px": 3 * px}
+
+    res = {"label": "4000 us", "glass": {"mm": 0.7, "index": 1.5},
+           "methods": [{"method": "rotstar", "truth": {"A": truth(0.01), "B": truth(0.02)},
+                        "glass": {s: {"truth_plain": truth(0.2)} for s in "AB"}},
+                       {"method": "mrgingham", "truth": {"A": truth(0.5)}, "glass": None}]}
+    est = {"rotstar": {"A": {"thickness_mm": 0.71, "sigma_mm": 0.05, "applied": True, "reason": "estimated",
+                             "truth": truth(0.012)},
+                       "B": {"thickness_mm": 4.2, "sigma_mm": 0.3, "applied": False, "reason": "more than any",
+                             "truth": truth(0.2)}}}
+    t = glass.table(res, est)
+    assert t.rows == [["rotstar", "0.2 / 0.2", "0.01 / 0.02", "0.71 +- 0.05 / 4.2 +- 0.3", "yes / no",
+                       "0.012 / 0.2"]]  # a method without the glass's correction (not calibrated) has no row
+    s = glass.summary(res, est)
+    assert "0.2 / 0.2 px from the true camera plain, 0.01 / 0.02 px corrected for the known 0.7 mm" in s
+    assert "B: 4.2 +- 0.3 mm, not applied: more than any" in s

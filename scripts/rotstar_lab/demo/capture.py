@@ -20,7 +20,8 @@ a run without it), then, when the pattern is the paper's sequence
 the checkerboard: the paper's same-photons rule). The screen shows frames
 encoded for a display gamma of PATTERN_GAMMA with its own SCREEN_GAMMA
 (simulate.screen.shown_light: 8 bits, a mismatch that bends the phase
-shifts' sinusoids and leaves the binary frames alone). The square board goes to
+shifts' sinusoids and leaves the binary frames alone), its pixels under the
+cover glass of scene.screen_glass (every board: the pattern's, the square one). The square board goes to
 <exposure>/<g>-square/poseNNN/checkerboard.png as 8 bits, for mrgingham;
 with keep_images every frame of the sequence is written as a rotstar dataset.
 """
@@ -37,7 +38,7 @@ import cv2
 
 from rotstar_mrcal.parallel import process_map
 from rotstar_lab.demo.scene import (
-    CAPTURES, EXPOSURES, NOISE, PATTERN_GAMMA, SCREEN_GAMMA, SHOT, coma_psf, exposure_dir,
+    CAPTURES, EXPOSURES, NOISE, PATTERN_GAMMA, SCREEN_GAMMA, SHOT, coma_psf, exposure_dir, screen_glass,
 )
 from rotstar_mrcal.peers.cornersets import detect_methods
 from rotstar_mrcal.simulate.captures import averaged_captures, lit_box
@@ -90,7 +91,7 @@ def capture_pose(job: Job) -> PoseResult:
     """Render one pose once; per exposure: expose, detect every method, write the square board PNG"""
     t0 = time.perf_counter()
     layout, model = _W["layout"], _W["model"]
-    kw = dict(supersample=2, psf=_W["psf"], rays=_W["rays"])
+    kw = dict(supersample=2, psf=_W["psf"], rays=_W["rays"], glass=screen_glass())  # every board under the glass
     E = simulate.render_irradiance(_W["screen"], model, job.rt, **kw)  # layout.frames() (+ the ChArUco board)
     Ech = E[-1] if job.charuco else None
     E = E[:-1] if job.charuco else E
