@@ -199,6 +199,8 @@ def prefilter(frames: np.ndarray, sigma: float = PREFILTER_SIGMA) -> np.ndarray:
     if sigma <= 0:
         return frames
     return np.stack([cv2.GaussianBlur(f, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE) for f in frames])
+
+
 def _frame_stack(frames) -> np.ndarray:
     """(nframes, H, W) float32 of one frame (H, W) or a stack"""
     frames = np.asarray(frames, np.float32)

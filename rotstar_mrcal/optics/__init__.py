@@ -1,4 +1,4 @@
-"""Optics of the synthetic experiment: Seidel wavefront PSFs and the Cramer-Rao bound
+"""Optics: Seidel wavefront PSFs, the point-spread functions the simulator applies, and the Cramer-Rao bound
 
 SYNOPSIS
 
@@ -13,6 +13,8 @@ Modules, one concept each:
     wavefront  Seidel coefficients and the pupil function P exp(2 pi i W)
     psf        H = A |F(P exp(2 pi i W))|^2 sampled at the renderer's sub-pixels;
                adapters for simulate.render_irradiance (SeidelPSF, radial_psf, LensPSF)
+    blur       point-spread functions applied to a supersampled image (Gaussian, a kernel, one per tile;
+               the renderer's psf argument), and the convolution they share
     crlb       Fisher information of a corner position and its Cramer-Rao bound
 
 See doc/optics.md.
@@ -25,5 +27,6 @@ __getattr__, __dir__, __all__ = attach(__name__, {
     "wavefront": ["Seidel", "TERMS", "pupil_function"],  # (the function wavefront: optics.wavefront.wavefront)
     "psf": ["Optics", "wavefront_psf", "gaussian_psf", "SeidelPSF", "radial_psf", "LensPSF",
             "asymmetry", "centroid_px", "second_moment_px", "geometric_radius_px"],
+    "blur": ["GaussianPSF", "KernelPSF", "TiledPSF", "as_psf", "gaussian_kernel"],
     "crlb": ["fisher_information", "crlb_cov", "crlb_rms", "closed_form_corner_bound"],
 })

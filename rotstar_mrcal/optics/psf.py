@@ -47,7 +47,7 @@ import math
 
 import numpy as np
 
-from rotstar_mrcal.simulate.blur import TiledPSF, convolve
+from rotstar_mrcal.optics.blur import TiledPSF, convolve
 from rotstar_mrcal.optics.wavefront import Seidel, pupil_function
 
 DEFAULT_TAIL = 2e-3

@@ -19,7 +19,6 @@ Modules, one concept each:
     camera    camera presets; the cached per-pixel rays of a camera model
     screen    the screen as a light source (frames -> summed-area tables)
     irradiance  rays -> board plane -> screen, area-sampled sub-pixels, PSF, blocks
-    blur      point-spread functions on the supersampled image
     exposure  gain, black level, noise, saturation, 8/16-bit quantisation
     poses     random calibration poses that keep the board inside the image;
               boards hanging over the image's edges (partial views)
@@ -37,7 +36,6 @@ __getattr__, __dir__, __all__ = attach(__name__, {
     "camera": ["PRESETS", "RayGrid", "camera_rays", "fov_deg", "preset_model"],
     "dataset": ["Settings", "Truth", "load_truth", "pose_names", "render_pose", "true_corners", "write_dataset"],
     "exposure": ["expose", "full_scale_code"],
-    "blur": ["GaussianPSF", "KernelPSF", "TiledPSF", "as_psf", "gaussian_kernel"],
     "poses": ["default_distance_range", "hanging_poses", "look_at_pose", "pose_ok", "random_poses", "tilt_angle"],
     "irradiance": ["render_irradiance"],
     "screen": ["Screen", "exact_frames", "make_screen", "png_frames", "shown_light"],

@@ -60,7 +60,7 @@ from rotstar_mrcal.parallel import process_map
 from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.simulate.camera import RayGrid, camera_rays, remember_rays
 from rotstar_mrcal.simulate.exposure import expose
-from rotstar_mrcal.simulate.blur import describe_psf
+from rotstar_mrcal.optics.blur import describe_psf
 from rotstar_mrcal.simulate.display import centred_maps, homogeneous, identity_maps, offset_maps, show_frames
 from rotstar_mrcal.simulate.irradiance import render_irradiance
 from rotstar_mrcal.simulate.screen import Screen, exact_frames, make_screen

@@ -63,7 +63,7 @@ import scipy.sparse
 
 from rotstar_mrcal.optics.refraction import Glass, emitting_hits
 from rotstar_mrcal.simulate.camera import RayGrid, camera_rays, subpixel_rays
-from rotstar_mrcal.simulate.blur import as_psf, psf_radius
+from rotstar_mrcal.optics.blur import as_psf, psf_radius
 from rotstar_mrcal.simulate.screen import Screen
 
 MIN_BOX = 1e-3

@@ -76,7 +76,7 @@ from rotstar_mrcal.simulate.dataset import (
     Settings, _do_pose, _setup, _STATE, read_truth_json, true_corners, write_truth_json,
 )
 from rotstar_mrcal.optics.psf import LensPSF
-from rotstar_mrcal.simulate.blur import describe_psf
+from rotstar_mrcal.optics.blur import describe_psf
 from rotstar_mrcal.simulate.poses import pose_ok, random_poses
 from rotstar_mrcal.simulate.screen import exact_frames
 

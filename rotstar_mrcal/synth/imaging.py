@@ -260,7 +260,7 @@ class FFTBlur:
     SYNOPSIS
 
         >>> import numpy as np
-        >>> from rotstar_mrcal.simulate.blur import convolve
+        >>> from rotstar_mrcal.optics.blur import convolve
         >>> rng = np.random.default_rng(0)
         >>> k, img = rng.random((7, 5)), rng.random((2, 40, 30))
         >>> blur = FFTBlur(k / k.sum(), (40, 30))

@@ -13,7 +13,7 @@ from rotstar_mrcal.optics import (
 )
 from rotstar_mrcal.optics.wavefront import wavefront
 from rotstar_mrcal.optics.crlb import crlb_cov
-from rotstar_mrcal.simulate.blur import KernelPSF
+from rotstar_mrcal.optics.blur import KernelPSF
 from rotstar_mrcal.synth.bound import pattern_bounds
 
 OPTICS = Optics()  # F/2, 3 um, 550 nm: lambda N / p = 0.3667 px

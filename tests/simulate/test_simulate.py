@@ -15,11 +15,11 @@ from scipy.special import ndtr
 from rotstar_mrcal import dataset as ds
 from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.simulate import (
-    Settings, TiledPSF, camera_rays, exact_frames, expose, gaussian_kernel, load_truth, look_at_pose,
+    Settings, camera_rays, exact_frames, expose, load_truth, look_at_pose,
     make_screen, pose_ok, preset_model, random_poses, render_irradiance, tilt_angle, true_corners,
     write_dataset,
 )
-from rotstar_mrcal.simulate.blur import normalize_kernel
+from rotstar_mrcal.optics.blur import TiledPSF, gaussian_kernel, normalize_kernel
 from rotstar_mrcal.simulate.poses import board_centre_m, board_extent_m
 from rotstar_mrcal.simulate.screen import screen_to_board
 

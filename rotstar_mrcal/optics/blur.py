@@ -3,7 +3,7 @@
 SYNOPSIS
 
     >>> import numpy as np
-    >>> from rotstar_mrcal.simulate.blur import as_psf, gaussian_kernel
+    >>> from rotstar_mrcal.optics.blur import as_psf, gaussian_kernel
     >>> k = gaussian_kernel(1.0, 4)          # sigma 1 camera pixel at 4x4 supersampling
     >>> k.shape, round(float(k.sum()), 12)
     ((33, 33), 1.0)
@@ -179,7 +179,7 @@ class TiledPSF:
     SYNOPSIS
 
         >>> import numpy as np
-        >>> from rotstar_mrcal.simulate.blur import TiledPSF, gaussian_kernel
+        >>> from rotstar_mrcal.optics.blur import TiledPSF, gaussian_kernel
         >>> psf = TiledPSF(lambda x, y, s: gaussian_kernel(0.5 + x / 200, s), tile_px=16, radius_px=4)
         >>> psf(np.ones((1, 128, 128), np.float32), (0, 0), 4).mean().round(6)
         np.float32(1.0)
