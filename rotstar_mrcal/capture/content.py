@@ -51,6 +51,13 @@ pass or several), with holds as short as two camera frames:
 6. every frame of pattern.json must have a class: a missing one raises
    SegmentError naming it (and the time its place in the loop went by).
 
+7. blends in some rows: a camera frame that caught a little of the entry
+   before or after it in some rows (the panel scanning out, the LCD still
+   switching: a few per cent in a band of rows, too few pixels beyond k
+   sigmas for step 1) is left out of its displayed frame's average
+   (blend_free: per row, the weight of the neighbouring entry's picture in
+   the frame's residual, in sigmas of the noise; opts.content_blend_z).
+
 The averages weight every clean camera frame equally.
 """
 
@@ -367,15 +374,73 @@ def assign_entries(visits: list[Visit], X: np.ndarray, n_classes: int, t: np.nda
     return by_entry, corr
 
 
+def row_blend(r: np.ndarray, D: np.ndarray, rows: np.ndarray, n_rows: int, var: float, smooth: int = 3) -> np.ndarray:
+    """(n_rows,) z-score of the blend of D in the residual r, per image row (rows: the row of every element)
+
+    r: a camera frame minus its displayed frame's mean; D: another displayed
+    frame minus that mean. Per row the least-squares weight of D in r,
+    w = <r, D> / <D, D>, over `smooth` neighbouring rows, divided by its
+    standard deviation under noise alone (var: of one element of r). A frame
+    whose exposure caught the panel scanning out, or the LCD still switching,
+    holds a little of the entry before or after in some rows: a positive
+    weight there. 0 where D is flat.
+
+    >>> rng = np.random.default_rng(0)
+    >>> rows = np.repeat(np.arange(20), 50); D = rng.choice([-0.8, 0.8], 1000)
+    >>> r = 0.005 * rng.standard_normal(1000); r[rows < 2] += 0.02 * D[rows < 2]   # 2 % blended in rows 0-1
+    >>> z = row_blend(r, D, rows, 20, 0.005 ** 2); bool(z[:2].min() > 10 and np.abs(z[4:]).max() < 4)
+    True
+    """
+    k = np.ones(smooth)
+    rd = np.convolve(np.bincount(rows, r * D, n_rows), k, "same")
+    dd = np.convolve(np.bincount(rows, D * D, n_rows), k, "same")
+    return np.where(dd > 0, rd / np.sqrt(np.maximum(dd, 1e-30) * var), 0.0)
+
+
+def blend_free(X: np.ndarray, idx: list[int], others: list[np.ndarray], rows: np.ndarray, sigma: float,
+               z: float = 6.0) -> list[int]:
+    """The camera frames of idx (one displayed frame's) with no row that blends in one of the others
+
+    others: the means of the displayed frames shown before and after it
+    (row_blend's D, after removing this one's mean). A frame is compared with
+    the mean of all of idx after fitting its gain and offset (gain_residual);
+    sigma: the noise of the difference of two camera frames, so one frame's
+    is sigma / sqrt(2). Where a blended frame pulls the mean, the clean
+    ones show a negative weight, which is not a blend. Keeps at least one
+    frame (the least blended) and all when there are no others.
+    """
+    if not others or len(idx) < 2:
+        return list(idx)
+    n_rows = int(rows.max()) + 1
+    m = X[idx].mean(axis=0)
+    var = sigma * sigma / 2 * (1 + 1 / len(idx))
+    worst = []
+    for i in idx:
+        r = gain_residual(m, X[i])
+        worst.append(max(float(row_blend(r, o - m, rows, n_rows, var).max()) for o in others))
+    keep = [i for i, w in zip(idx, worst) if w <= z]
+    return keep or [idx[int(np.argmin(worst))]]
+
+
 def content_segmentation(frames, X: np.ndarray, visits: list[Visit], by_entry: dict[int, int], loop: list[dict],
-                         full_scale: float, corr: float, motion: float, opts: Options) -> Segmentation:
-    """The Segmentation of a split by content: every clean camera frame of each entry averaged"""
+                         full_scale: float, corr: float, motion: float, opts: Options, rows: np.ndarray | None = None,
+                         sigma: float = 0.0) -> Segmentation:
+    """The Segmentation of a split by content: every clean camera frame of each entry averaged
+
+    rows (the image row of every element of X) and sigma (find_runs'): camera
+    frames that blend in a little of the entry before or after in some rows
+    are left out (blend_free).
+    """
     T = len(frames)
     images, ranges, used = {}, {}, {}
+    means = {e: X[[i for v in visits if v.cls == c for i in v.frames]].mean(axis=0) for e, c in by_entry.items()}
     for e in range(1, len(loop)):
         mine = [v for v in visits if v.cls == by_entry[e]]
         f = loop[e]["file"]
         used[f] = sorted(i for v in mine for i in v.frames)
+        if rows is not None and opts.content_blend_z > 0:
+            near = [means[k % len(loop)] for k in (e - 1, e + 1) if k % len(loop) in means]
+            used[f] = blend_free(X, used[f], near, rows, sigma, opts.content_blend_z)
         images[f] = _frames_mean(frames, used[f])
         longest = max(mine, key=lambda v: len(v.frames))
         ranges[f] = (longest.frames[0], longest.frames[-1] + 1)
@@ -407,7 +472,10 @@ def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale:
     if T < 4:
         raise SegmentError(f"the recording is too short: {T} frame(s)")
     t = np.arange(T, dtype=float) if times is None else np.asarray(times, float)
-    X = frame_vectors(frames, full_scale, opts.content_step, screen_pixels(frames, full_scale, opts.content_step))
+    mask = screen_pixels(frames, full_scale, opts.content_step)
+    X = frame_vectors(frames, full_scale, opts.content_step, mask)
+    small = downsample(frames[0], opts.content_step).shape
+    rows = np.nonzero(mask)[0] if mask is not None else np.repeat(np.arange(small[0]), small[1])
     cr = find_runs(X, opts)
     visits = visits_of(cr)
     if cr.n_classes > len(loop):
@@ -421,4 +489,5 @@ def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale:
     if np.isfinite(motion) and motion > opts.max_motion:
         raise SegmentError(f"the camera moved: the image drifts {motion:.2f} px over the recording "
                            f"(limit {opts.max_motion} px)")
-    return content_segmentation(frames, X, visits, by_entry, loop, full_scale, corr, motion, opts)
+    return content_segmentation(frames, X, visits, by_entry, loop, full_scale, corr, motion, opts, rows,
+                                cr.sigma)

@@ -39,6 +39,8 @@ class Options:
     marker_hold: int = 0  # content: the start marker's hold (0: as hold says)
     refresh_hz: float = 60.0  # content: the screen's refresh rate (with times in seconds: each entry's time)
     content_timing: float = 1.0  # content: a visit's time may be off by this many (mean of two) entry durations
+    content_blend_z: float = 6.0  # content: a camera frame blending in the entry before or after by this many sigmas
+    #                               in some rows is not averaged (content.blend_free; 0: every clean frame averaged)
 
 
 @dataclasses.dataclass
