@@ -52,6 +52,17 @@ example:
 DETECT_METHODS = ["rotstar"] + [n for n, m in METHODS.items() if m.start == "rotstar"]
 
 
+REFINE_HELP = ("symmetric: the paper's Eq. 1 on all rotating-star frames (default); "
+               "opencv: cv2.cornerSubPix on the checkerboard frame; "
+               "psf: the symmetric fit moved to the light's centroid, where the 16 edges meet, each placed "
+               "at its line-spread function's mean (corners whose window is under 5 px keep the symmetric "
+               "fit's; doc/blur-map.md); "
+               "psf-sim: the symmetric fit less its offset from the light's centroid, found by running the "
+               "same fit on the local star rendered through the coma the edges show, pooled over the "
+               "dataset's poses (it needs some views with windows of 4 px or more; doc/blur-map.md); "
+               "saddle: Lucchese-Mitra saddle fit on the checkerboard frame")
+
+
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="rotstar-detect", description=DESCRIPTION, epilog=EPILOG,
                                 formatter_class=HelpFormatter)
@@ -60,16 +71,7 @@ def parse_args(argv=None):
     p.add_argument("--window", type=number_arg(float, MIN_WINDOW), default=10.0,
                    help="refinement half-window w in camera pixels (default 10); capped per corner "
                         "so the window stays inside its element")
-    p.add_argument("--refine", choices=REFINERS, default="symmetric",
-                   help="symmetric: the paper's Eq. 1 on all rotating-star frames (default); "
-                        "opencv: cv2.cornerSubPix on the checkerboard frame; "
-                        "psf: the symmetric fit moved to the light's centroid, where the 16 edges meet, each placed "
-                        "at its line-spread function's mean (corners whose window is under 5 px keep the symmetric "
-                        "fit's; doc/blur-map.md); "
-                        "psf-sim: the symmetric fit less its offset from the light's centroid, found by running the "
-                        "same fit on the local star rendered through the coma the edges show, pooled over the "
-                        "dataset's poses (it needs some views with windows of 4 px or more; doc/blur-map.md); "
-                        "saddle: Lucchese-Mitra saddle fit on the checkerboard frame")
+    p.add_argument("--refine", choices=REFINERS, default="symmetric", help=REFINE_HELP)
     p.add_argument("--method", choices=DETECT_METHODS, default="rotstar",
                    help="whose corners to write, all from the same poses and started from the rotating star's "
                         "labelled corners: " + "; ".join(f"{n}: {METHODS[n].description}" for n in DETECT_METHODS[1:])

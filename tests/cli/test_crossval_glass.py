@@ -108,6 +108,8 @@ def test_bad_glass_values_give_one_line_and_exit_2(bad, run_cli, tmp_path):
     assert len(err) == 1 and bad[0] in err[0] and bad[1] in err[0], r.stderr
 
 
+@pytest.mark.slow  # make test-slow: four more corner sets calibrated; tests/calibrate/test_glass.py keeps the estimate and
+# the clear screen in make test
 def test_the_estimate_is_applied_through_glass_and_leaves_a_clear_screen_unchanged(glass_sets, run_cli, tmp_path):
     """--glass estimate: one corner set through 0.7 mm, one of the same kind of poses without glass"""
     clear = [write_group(str(tmp_path / g), seed, 0.0) for g, seed in (("A", 21), ("B", 22))]

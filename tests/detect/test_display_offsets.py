@@ -3,7 +3,7 @@
 A real screen can show the frames of the sequence a pixel or so apart, the
 same in every pose (recordings of a monitor, doc/detector.md); before this was
 modelled every such pose was skipped as "the camera moved". The dataset here
-is six poses of the session's D435 dataset (same poses, same noise) rendered
+is four poses of the session's D435 dataset (same poses, same noise) rendered
 with per-frame display offsets of up to 3 display pixels, plus one pose whose
 camera moved by 0.2 px halfway through the sequence.
 """
@@ -26,7 +26,7 @@ from rotstar_mrcal.detect.response import binarize, response_map
 from rotstar_mrcal.detect.run import detect_dataset
 from rotstar_mrcal.simulate import write_dataset
 
-N_SHOWN = 6
+N_SHOWN = 4  # the fewest from which the dataset's maps are taken (doc/detector.md)
 MOVE_PX = 0.2
 OFFSETS = display_offsets("random:3", 8, 0)  # display px, up to 3
 

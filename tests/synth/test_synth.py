@@ -319,6 +319,7 @@ def test_quick_experiment_outputs(quick_run, capsys):
     assert "0 to compute" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # make test-slow: on the quick experiment's whole run (test_quick_experiment_outputs)
 def test_quick_verdicts_are_computed_from_the_numbers(quick_run):
     """The summary's verdicts are what verdicts.verdicts() says about table.json's numbers"""
     summary = open(quick_run / "summary.md").read()
@@ -337,6 +338,7 @@ def test_quick_verdicts_are_computed_from_the_numbers(quick_run):
         assert verdicts.verdicts(fake)[0].status == status
 
 
+@pytest.mark.slow  # make test-slow: on the quick experiment's whole run (test_quick_experiment_outputs)
 def test_quick_table_sanity(quick_run):
     rows = json.load(open(quick_run / "table.json"))["over_tilts"]
     get = lambda **k: table.lookup(rows, **k)  # noqa: E731
