@@ -38,7 +38,7 @@ def loop_frames():
     """One loop of the player (150 camera frames, 16-bit) as the pinhole-small camera sees it; repeats seamlessly"""
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, LAYOUT, 1, np.random.default_rng(3))[0]
-    E = loop_irradiance(LAYOUT, model, rt)
+    E = loop_irradiance(LAYOUT, model, rt, supersample=2)
     sched = player_schedule(N_ENTRIES, hold=HOLD, refresh_hz=60, duration=12.5)
     frames, _ = camera_stream(E, sched, LOOP, fps=25, exposure_s=0.012, noise=0.01, t0=0.013, rng=7)
     return frames
@@ -256,7 +256,7 @@ def test_capture_paper_sequence_one_pose(tmp_path, capsys):
     hold = 24  # 29 entries x 24 refreshes at 60 Hz = 11.6 s = 290 camera frames at 25 fps: the stream repeats
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, paper, 1, np.random.default_rng(3))[0]
-    E = loop_irradiance(paper, model, rt)
+    E = loop_irradiance(paper, model, rt, supersample=2)
     sched = player_schedule(n, hold=hold, refresh_hz=60, duration=25)
     frames, _ = camera_stream(E, sched, 290, fps=25, exposure_s=0.012, noise=0.01, t0=0.013, rng=7)
     save_recording(str(tmp_path / "session.npy"), np.concatenate([frames] * 3), fps=25)

@@ -103,7 +103,7 @@ def scene():
     """The loop's irradiance as the pinhole-small camera sees the screen (full size, and a quarter for speed)"""
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, LAYOUT, 1, np.random.default_rng(3))[0]
-    E = loop_irradiance(LAYOUT, model, rt)
+    E = loop_irradiance(LAYOUT, model, rt, supersample=2)
     small = np.stack([cv2.resize(e, (e.shape[1] // 4, e.shape[0] // 4), interpolation=cv2.INTER_AREA) for e in E])
     return E, small
 

@@ -63,11 +63,11 @@ def loops():
     sched = player_schedule(N_ENTRIES, hold=HOLD, duration=LOOP_S + 1)
     out = []
     for r in rt:
-        E = loop_irradiance(LAYOUT, model, r)
+        E = loop_irradiance(LAYOUT, model, r, supersample=2)
         f, _ = camera_stream(E, sched, int(LOOP_S * 25), fps=25, exposure_s=0.012, noise=0.005, gain=0.6,
                              t0=0.013, rng=8)
         out.append((f >> 4).astype(np.uint16))  # 12-bit values, as Y12I carries them
-    E = loop_irradiance(LAYOUT, model, rt[0])
+    E = loop_irradiance(LAYOUT, model, rt[0], supersample=2)
     Ec = np.stack([cv2.resize(e, COLOUR_SIZE, interpolation=cv2.INTER_AREA) for e in E])
     f, _ = camera_stream(Ec, sched, int(LOOP_S * COLOUR_FPS), fps=COLOUR_FPS, exposure_s=0.012, noise=0.01,
                          gain=0.6, t0=0.013 + COLOUR_T0, bits=8, rng=9)

@@ -572,7 +572,7 @@ def player_loop_frames():
     layout = make_layout(screen=(800, 600), pitch=100, band=24)
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, layout, 1, np.random.default_rng(3))[0]
-    E = loop_irradiance(layout, model, rt)
+    E = loop_irradiance(layout, model, rt, supersample=2)
     n = len(player_loop(layout.frames()))
     frames, _ = camera_stream(E, player_schedule(n, hold=18, duration=12.5), n * 18 * 25 // 60, fps=25, exposure_s=0.012,
                               noise=0.005, gain=0.6, t0=0.013, rng=8)

@@ -189,10 +189,10 @@ def test_outer_band_at_the_image_edge_is_not_out_of_view(pose001, d435_seq):
     assert np.nanmax(err) < 0.05
 
 
-def test_simulated_display_offsets_cli(tmp_path, run_cli):
+def test_simulated_display_offsets_cli(tmp_path, run_cli, pattern_dir):
     """rotstar-simulate --display-offsets writes them into the truth; bad specs are one line"""
     seq = tmp_path / "s"
-    r = run_cli("rotstar-simulate", "--out", seq, "--camera", "pinhole-small", "--poses", "1",
+    r = run_cli("rotstar-simulate", "--out", seq, "--camera", "pinhole-small", "--poses", "1", "--pattern", pattern_dir,
                 "--display-offsets", "1,0,0,1,-1,0,0,-1,1,1,-1,-1,0,0,2,0", "--supersample", "1")  # (only the truth read)
     assert r.returncode == 0, r.stderr
     import json
