@@ -38,7 +38,7 @@ BLEND = 0.1  # a camera frame carrying more than this of another displayed frame
 def E():
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, LAYOUT, 1, np.random.default_rng(3))[0]
-    E = loop_irradiance(LAYOUT, model, rt)
+    E = loop_irradiance(LAYOUT, model, rt, supersample=2)
     return np.stack([cv2.resize(e, (e.shape[1] // 4, e.shape[0] // 4), interpolation=cv2.INTER_AREA) for e in E])
 
 

@@ -259,7 +259,7 @@ def test_small_board_far_away_keeps_the_identity_frames_apart(tmp_path):
     """
     model = simulate.preset_model("pinhole-small")
     rt = simulate.look_at_pose(model, LAYOUT, (200.0, 150.0), 0.3, tilt=0.3)
-    E = loop_irradiance(LAYOUT, model, rt)
+    E = loop_irradiance(LAYOUT, model, rt, supersample=2)
     corners = simulate.true_corners(model, LAYOUT, rt)
     x0, y0 = corners.reshape(-1, 2).min(axis=0)
     x1, y1 = corners.reshape(-1, 2).max(axis=0)
@@ -284,7 +284,7 @@ def test_board_partly_out_of_view(tmp_path, capsys):
     truth = simulate.true_corners(model, LAYOUT, rt)
     inside = np.all((truth > 3) & (truth < np.array([636, 396])), axis=-1)
     assert 4 < inside.sum() < LAYOUT.nx * LAYOUT.ny - 4
-    E = loop_irradiance(LAYOUT, model, rt)
+    E = loop_irradiance(LAYOUT, model, rt, supersample=2)
     frames, seq = camera_stream(E, player_schedule(N_ENTRIES, hold=20, duration=9, start_entry=17), 220, fps=25,
                                 noise=NOISE, gain=GAIN, rng=10)
     save_recording(str(tmp_path / "rec.npy"), frames, seq, fps=25)
@@ -328,7 +328,7 @@ def test_d435_full_size_10bit_end_to_end(tmp_path, capsys):
     layout = make_layout()
     model = simulate.preset_model("d435")
     rt = simulate.random_poses(model, layout, 1, np.random.default_rng(11))[0]
-    E = loop_irradiance(layout, model, rt)
+    E = loop_irradiance(layout, model, rt, supersample=2)
     truth = simulate.true_corners(model, layout, rt)
     sched = player_schedule(len(player_loop(layout.frames())), hold=20, refresh_hz=60, duration=14.5,
                             start_entry=7, start_phase=0.5)
@@ -358,7 +358,7 @@ def test_paper_sequence_segments_in_order():
     come back each as its own display frame, in order"""
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, PAPER, 1, np.random.default_rng(3))[0]
-    E = half(loop_irradiance(PAPER, model, rt))
+    E = half(loop_irradiance(PAPER, model, rt, supersample=2))
     n = len(player_loop(PAPER.frames()))
     assert n == 29  # marker, 8 rotating-star, 10 identity, 8 phase, the checkerboard, the star
     sched = player_schedule(n, hold=20, duration=2.2 * n / 3)

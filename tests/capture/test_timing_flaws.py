@@ -53,7 +53,7 @@ def scenes(k):
     model = simulate.preset_model("pinhole-small")
     rts = simulate.random_poses(model, LAYOUT, k, np.random.default_rng(3))
     return [np.stack([cv2.resize(e, (e.shape[1] // 4, e.shape[0] // 4), interpolation=cv2.INTER_AREA)
-                      for e in loop_irradiance(LAYOUT, model, rt)]) for rt in rts]
+                      for e in loop_irradiance(LAYOUT, model, rt, supersample=2)]) for rt in rts]
 
 
 def seen(truth, seq) -> set[int]:

@@ -392,6 +392,7 @@ def ipad_paper(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow  # make test-slow: the iPad's whole paper sequence written (7 s); the default sequence's levels stay
 def test_paper_sequence_levels_match_the_pngs(ipad_paper):
     """The closed forms of the phase and star frames' mean luminance equal the decoded PNGs' means"""
     from rotstar_mrcal.pattern.render import decode_display
@@ -405,6 +406,7 @@ def test_paper_sequence_levels_match_the_pngs(ipad_paper):
     np.testing.assert_allclose(lev, got, atol=2e-3)
 
 
+@pytest.mark.slow  # make test-slow: as above; the default sequence's pixel-exact checks in chromium stay in make test
 @needs_chromium
 def test_paper_sequence_pixel_exact(ipad_paper, browsers):
     """The phase-shift frames (gamma-encoded fringes: any colour conversion would change their values) and the
