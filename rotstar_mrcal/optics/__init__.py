@@ -15,6 +15,7 @@ Modules, one concept each:
                adapters for simulate.render_irradiance (SeidelPSF, radial_psf, LensPSF)
     blur       point-spread functions applied to a supersampled image (Gaussian, a kernel, one per tile;
                the renderer's psf argument), and the convolution they share
+    refraction where a pixel under a cover glass is seen from a point (Snell's law at the glass)
     crlb       Fisher information of a corner position and its Cramer-Rao bound
 
 See doc/optics.md.
