@@ -3,7 +3,7 @@
 
 SYNOPSIS
 
-    python scripts/demo.py --out demo-out          # what `make demo` runs (~2.5 min on 2 cores)
+    python scripts/demo.py --out demo-out          # what `make demo` runs (~5 min on 2 cores)
     python scripts/demo.py --out /tmp/d --quick    # fewer poses, for a smoke run
 
 The set-up (camera, coma, pose groups, exposures) is rotstar_lab.demo.scene;
