@@ -135,14 +135,19 @@ def solve_with_glass(oi0: dict, thickness_mm: float, index: float = DEFAULT_INDE
     thickness applies the opposite shift (no glass does that; the cost's
     search runs through 0 smoothly).
     """
+    return solve_corrected(oi0, Glass.mm(abs(thickness_mm), index), np.sign(thickness_mm), solves)
+
+
+def solve_corrected(oi0: dict, glass: Glass, sign: float = 1.0, solves: int = SOLVES) -> dict:
+    """solve_with_glass for a Glass: each of `solves` solves moves the raw observations by sign times the shift
+    from the poses it starts from (observation_shift); no glass: solved once, as they are"""
     oi = copy.deepcopy(oi0)
     oi["do_apply_outlier_rejection"] = False
     raw = oi0["observations_board"]
-    glass = Glass.mm(abs(thickness_mm), index)
     for _ in range(solves if not glass.none else 1):
         obs = raw.copy()
         if not glass.none:
-            obs[..., :2] = raw[..., :2] + np.sign(thickness_mm) * observation_shift(oi, glass)
+            obs[..., :2] = raw[..., :2] + sign * observation_shift(oi, glass)
         oi["observations_board"] = obs
         mrcal.optimize(**oi)
     return oi

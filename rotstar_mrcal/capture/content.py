@@ -433,12 +433,14 @@ def content_segmentation(frames, X: np.ndarray, visits: list[Visit], by_entry: d
     """
     T = len(frames)
     images, ranges, used = {}, {}, {}
-    means = {e: X[[i for v in visits if v.cls == c for i in v.frames]].mean(axis=0) for e, c in by_entry.items()}
+    blends = rows is not None and opts.content_blend_z > 0
+    means = {e: X[[i for v in visits if v.cls == c for i in v.frames]].mean(axis=0)
+             for e, c in by_entry.items()} if blends else {}
     for e in range(1, len(loop)):
         mine = [v for v in visits if v.cls == by_entry[e]]
         f = loop[e]["file"]
         used[f] = sorted(i for v in mine for i in v.frames)
-        if rows is not None and opts.content_blend_z > 0:
+        if blends:
             near = [means[k % len(loop)] for k in (e - 1, e + 1) if k % len(loop) in means]
             used[f] = blend_free(X, used[f], near, rows, sigma, opts.content_blend_z)
         images[f] = _frames_mean(frames, used[f])
@@ -474,8 +476,11 @@ def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale:
     t = np.arange(T, dtype=float) if times is None else np.asarray(times, float)
     mask = screen_pixels(frames, full_scale, opts.content_step)
     X = frame_vectors(frames, full_scale, opts.content_step, mask)
-    small = downsample(frames[0], opts.content_step).shape
-    rows = np.nonzero(mask)[0] if mask is not None else np.repeat(np.arange(small[0]), small[1])
+    if mask is not None:
+        rows = np.nonzero(mask)[0]
+    else:
+        small = downsample(frames[0], opts.content_step).shape
+        rows = np.repeat(np.arange(small[0]), small[1])
     cr = find_runs(X, opts)
     visits = visits_of(cr)
     if cr.n_classes > len(loop):

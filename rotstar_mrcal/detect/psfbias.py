@@ -83,6 +83,7 @@ def fftconvolve(a: np.ndarray, b: np.ndarray, mode: str = "full") -> np.ndarray:
         raise ValueError(f"mode must be 'full' or 'valid', not {mode!r}")
     return out[..., hb - 1 : ha, wb - 1 : wa]
 
+
 PAD_PX = 2  # px beyond the window and the low-pass's reach in every rendered patch
 
 

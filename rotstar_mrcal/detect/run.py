@@ -215,14 +215,14 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
         if r.pose in display.motion_px:
             r.corners.motion_px = display.motion_px[r.pose]
     rejected = [r for r in results if r.pose in display.moved(max_motion)]
+    moved = {r.pose for r in rejected}
+    still = [r for r in results if r.found and r.pose not in moved]
     # the second pass is the symmetric joint refinement; a refiner that corrects its corners (the PSF-aware one)
     # keeps each pose's own maps
     if method == "rotstar" and refine.needs == "rotstar" and refine.correct is None and display.offsets is not None:
-        moved = {r.pose for r in rejected}
-        refine_with_dataset_maps(ds, [r for r in results if r.found and r.pose not in moved], display, jobs)
+        refine_with_dataset_maps(ds, still, display, jobs)
     if refine.samples is not None:
-        moved = {r.pose for r in rejected}
-        correct_with_dataset(ds.layout, [r.corners for r in results if r.found and r.pose not in moved], refine)
+        correct_with_dataset(ds.layout, [r.corners for r in still], refine)
     for r in rejected:
         r.error = (f"frames do not align: the camera moved during the sequence (its frames moved "
                    f"{r.corners.motion_px:.2f} px against each other beyond the screen's own maps, "

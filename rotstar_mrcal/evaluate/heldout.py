@@ -42,7 +42,7 @@ Through a screen's cover glass (glass: the one the model was corrected for,
 calibrate.glass), the test corners are corrected as the calibration's were:
 each moved to where the unrefracted pixel would have been seen from its
 board's solved pose (calibrate.glass.observation_shift), the poses solved
-again (SOLVES times in all), and the errors measured against the corrected
+again (calibrate.glass.solve_corrected), and the errors measured against the corrected
 corners. Without it, a model corrected for the glass is tested on corners
 that still carry it.
 """
@@ -54,7 +54,7 @@ import dataclasses
 import mrcal
 import numpy as np
 
-from rotstar_mrcal.calibrate.glass import SOLVES, observation_shift
+from rotstar_mrcal.calibrate.glass import solve_corrected
 from rotstar_mrcal.optics.refraction import Glass
 
 MIN_POINTS = 6
@@ -150,14 +150,11 @@ def heldout(model: mrcal.cameramodel, corners, spacing: float, calobject_warp=No
         do_apply_outlier_rejection=False,
     )
     mrcal.optimize(**oi)
-    shift = np.zeros(o.shape[:-1] + (2,))
-    for _ in range(SOLVES if glass is not None and not glass.none else 0):
-        shift = observation_shift(oi, glass)
-        oi["observations_board"] = np.concatenate((o[..., :2] + shift, o[..., 2:]), axis=-1)
-        mrcal.optimize(**oi)
+    if glass is not None and not glass.none:
+        oi = solve_corrected(oi, glass)  # its observations: the corners corrected for the glass
     obj = mrcal.ref_calibration_object(nx, ny, spacing, calobject_warp=warp)
     q = mrcal.project(mrcal.transform_point_rt(oi["rt_ref_frame"][:, None, None, :], obj), lensmodel, intrinsics)
-    e = np.linalg.norm(q - (corners[use] + shift), axis=-1)
+    e = np.linalg.norm(q - oi["observations_board"][..., :2], axis=-1)
     errors[use] = np.where(o[..., 2] > 0, e, np.nan)
     rt[use] = oi["rt_ref_frame"]
     return HeldOut(errors, rt)

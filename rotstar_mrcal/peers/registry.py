@@ -56,7 +56,8 @@ from rotstar_mrcal.pattern.layout import Layout
 from rotstar_mrcal.detect.pipeline import detect_pose
 from rotstar_mrcal.detect.edgespread import psf_correct
 from rotstar_mrcal.detect.psfbias import bias_correct, coma_samples
-from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner, lowpass_for, prefilter, refine_symmetric
+from rotstar_mrcal.detect.refine import (PREFILTER_SIGMA, SYMMETRIC, Refiner, lowpass_for, prefilter,
+                                         refine_symmetric)
 from rotstar_mrcal.peers import checkerboard as baselines
 from rotstar_mrcal.peers.checkerboard import (
     mrgingham_detect, opencv_find_chessboard, opencv_subpix, refine_by_window, saddle_refine,
@@ -85,12 +86,19 @@ def refine_saddle(frames, starts, window=5) -> np.ndarray:
     return _per_frame_mean(saddle_refine, frames, starts, window)
 
 
-def refine_psf(frames, starts, window=10.0) -> np.ndarray:
-    """The symmetric fit on the low-passed frames, then each corner moved to the light's centroid (psf_correct)"""
+def _symmetric_then(correct, frames, starts, window, lowpass=None) -> np.ndarray:
+    """The symmetric fit on the frames low-passed by `lowpass` px (None: refine.lowpass_for the windows, as
+    detect_pose), then correct(frames, corners, windows)"""
     frames = np.asarray(frames, np.float32)
     frames = frames[None] if frames.ndim == 2 else frames
-    q = refine_symmetric(prefilter(frames), starts, window)
-    return psf_correct(frames, q, window)
+    w = np.broadcast_to(np.asarray(window, float), (len(np.asarray(starts).reshape(-1, 2)),))
+    q = refine_symmetric(prefilter(frames, lowpass_for(w) if lowpass is None else lowpass), starts, w)
+    return correct(frames, q, w)
+
+
+def refine_psf(frames, starts, window=10.0) -> np.ndarray:
+    """The symmetric fit on the low-passed frames, then each corner moved to the light's centroid (psf_correct)"""
+    return _symmetric_then(psf_correct, frames, starts, window, PREFILTER_SIGMA)
 
 
 PSF = Refiner("psf", "rotstar", "the symmetric fit, then each corner moved to where its 16 edges, each at its "
@@ -100,11 +108,7 @@ PSF = Refiner("psf", "rotstar", "the symmetric fit, then each corner moved to wh
 
 def refine_psf_sim(frames, starts, window=10.0) -> np.ndarray:
     """The symmetric fit on the low-passed frames less its bias simulated through the local PSF (bias_correct)"""
-    frames = np.asarray(frames, np.float32)
-    frames = frames[None] if frames.ndim == 2 else frames
-    w = np.broadcast_to(np.asarray(window, float), (len(np.asarray(starts).reshape(-1, 2)),))
-    q = refine_symmetric(prefilter(frames, lowpass_for(w)), starts, w)
-    return bias_correct(frames, q, w)
+    return _symmetric_then(bias_correct, frames, starts, window)
 
 
 PSF_SIM = Refiner("psf-sim", "rotstar", "the symmetric fit less its bias under the local PSF: the same fit run on "
@@ -176,16 +180,13 @@ def _rotstar(p: PoseImages) -> Found:
     return Found(r.corners if r.found else None, None, r.error, r.shifts)
 
 
-def _rotstar_psf(p: PoseImages) -> Found:
-    r = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale, window=p.window,
-                    identity=p.identity, refine=PSF)
-    return Found(r.corners if r.found else None, None, r.error, r.shifts)
-
-
-def _rotstar_psf_sim(p: PoseImages) -> Found:
-    r = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale, window=p.window,
-                    identity=p.identity, refine=PSF_SIM)
-    return Found(r.corners if r.found else None, None, r.error, r.shifts)
+def _rotstar_refined(refine: Refiner):
+    """The method: detect_pose with this refiner in place of the symmetric fit"""
+    def run(p: PoseImages) -> Found:
+        r = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale, window=p.window,
+                        identity=p.identity, refine=refine)
+        return Found(r.corners if r.found else None, None, r.error, r.shifts)
+    return run
 
 
 def _rotstar_weighted(p: PoseImages) -> Found:
@@ -329,10 +330,10 @@ METHODS = {m.name: m for m in (
            relabel=True, demo=False),
     Method("rotstar-psf", "rotstar, PSF-aware (centroid of the light)", "rotstar", "own",
            "rotating-star frames, the symmetric fit moved to where the edges' line-spread means meet "
-           "(rotstar-detect --refine psf)", _rotstar_psf, demo=False),
+           "(rotstar-detect --refine psf)", _rotstar_refined(PSF), demo=False),
     Method("rotstar-psf-sim", "rotstar, less the bias simulated through the local PSF", "rotstar", "own",
            "rotating-star frames, the symmetric fit less its offset from the light's centroid, simulated on the "
-           "local star through the coma the edges show (rotstar-detect --refine psf-sim)", _rotstar_psf_sim,
+           "local star through the coma the edges show (rotstar-detect --refine psf-sim)", _rotstar_refined(PSF_SIM),
            demo=False),
 )}
 
