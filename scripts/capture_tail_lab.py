@@ -51,6 +51,19 @@ def with_windows(rotstar: np.ndarray, corners: np.ndarray, window: np.ndarray, s
     return out
 
 
+def common_mode(e: np.ndarray) -> tuple[float, float]:
+    """(shift, affine): the rms of the corners' mean error and of their affine fit over the corners, each over
+    what independent errors of the corners' rms would give (sqrt(1 / N), sqrt(3 / N))"""
+    ok = np.isfinite(e[..., 0])
+    j, i = np.nonzero(ok)
+    v = e[ok]
+    X = np.column_stack((np.ones(len(i)), i, j))
+    fit = X @ np.linalg.lstsq(X, v, rcond=None)[0]
+    rms = np.sqrt(np.mean(v ** 2))
+    return (float(np.linalg.norm(v.mean(axis=0)) / np.sqrt(2) / (rms * np.sqrt(1 / len(v)))),
+            float(np.sqrt(np.mean(fit ** 2)) / (rms * np.sqrt(3 / len(v)))))
+
+
 def quantiles(name: str, v: np.ndarray) -> str:
     v = v[np.isfinite(v)]
     q = np.percentile(v, [50, 95, 99, 100])
@@ -69,7 +82,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     model = half_d435()
     hold = None if a.hold == "short" else int(a.hold)
-    err, err_w, dw, dtrue, rows = [], [], [], [], []
+    err, err_w, dw, dtrue, common, rows = [], [], [], [], [], []
     for seed in [int(s) for s in a.seeds.split(",")]:
         for k, rt in enumerate(simulate.random_poses(model, LAYOUT, a.poses, np.random.default_rng([23, seed]))):
             E = render(model, rt)
@@ -85,6 +98,7 @@ def main(argv=None) -> int:
                 d = np.linalg.norm(c - ideal.corners, axis=-1)
                 cw = with_windows(keep["rotstar"], c, ideal.window, ideal.prefilter_px)
                 err.append(d.ravel())
+                common.append(common_mode(c - ideal.corners))
                 err_w.append(np.linalg.norm(cw - ideal.corners, axis=-1).ravel())
                 dw.append((keep["window"] - ideal.window).ravel())
                 say(f"seed {seed} pose {k} draw {r}: median {np.nanmedian(d):.4f} max {np.nanmax(d):.4f} px, "
@@ -99,6 +113,10 @@ def main(argv=None) -> int:
           + ", ".join(f"{v:+.2f}" for v in dw[big]))
     print(f"noise-free window minus the true one (simulate.visibility.true_windows): mean {np.nanmean(dtrue):+.3f}, "
           f"|.| median {np.nanmedian(np.abs(dtrue)):.3f}, max {np.nanmax(np.abs(dtrue)):.3f} px")
+    cm = np.array(common)
+    print(f"per recording, the error field's affine part over the corners against independent noise (1 if "
+          f"independent): shift {np.mean(cm[:, 0]):.2f}, affine {np.mean(cm[:, 1]):.2f} (means over "
+          f"{len(cm)} recordings)")
     if a.out:
         os.makedirs(a.out, exist_ok=True)
         med = np.nanmedian(err)
