@@ -20,6 +20,7 @@ Also the noise's rms per axis and how much of it is common to a pose's corners
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -90,16 +91,15 @@ def one_work(work: str, ideal_cache: dict) -> dict:
 
 
 def main(argv=None) -> int:
-    works = (argv if argv is not None else sys.argv[1:])
-    if not works:
-        print("capture_calib_decompose.py: give one or more capture_calib_bench --same-only work folders",
-              file=sys.stderr)
-        return 2
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("work", nargs="+", help="capture_calib_bench.py --same-only --work folders")
+    works = p.parse_args(argv).work
     cache: dict = {}
     rows = []
     for w in works:
         if not os.path.isdir(os.path.join(w, "short-same")):
-            print(f"capture_calib_decompose.py: {w}: not a capture_calib_bench --same-only work folder", file=sys.stderr)
+            print(f"capture_calib_decompose.py: {w}: not a capture_calib_bench --same-only work folder",
+                  file=sys.stderr)
             return 2
         r = one_work(w, cache)
         rows.append((w, r))
@@ -111,7 +111,8 @@ def main(argv=None) -> int:
             a, b, n = s["as_detected"], s["bias"], s["noise"]
             print(f"| {os.path.basename(w)} | {cap} | {s['noise_rms_px']:.4f} ({s['common_mode']:.2f}) | "
                   f"{a.get('median_px', np.nan):.4f} ({a.get('sigma_px', np.nan):.4f}) | "
-                  f"{b.get('median_px', np.nan):.4f} | {n.get('median_px', np.nan):.4f} ({n.get('sigma_px', np.nan):.4f}) |")
+                  f"{b.get('median_px', np.nan):.4f} | "
+                  f"{n.get('median_px', np.nan):.4f} ({n.get('sigma_px', np.nan):.4f}) |")
     return 0
 
 
