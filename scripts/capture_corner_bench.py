@@ -57,13 +57,15 @@ def flaw_set(name: str) -> Flaws:
     return Flaws(**{name: getattr(ALL_FLAWS, name)})
 
 
-def one_recording(E, hold, flaws: Flaws, rng, blend_z: float = Options.content_blend_z
+def one_recording(E, hold, flaws: Flaws, rng, blend_z: float = Options.content_blend_z, keep: dict | None = None
                   ) -> tuple[np.ndarray | None, float, float]:
     """(corners (ny, nx, 2) or None, worst impurity of a frame averaged, clean camera frames per star frame)
 
     Recorded, split and checked as capture.session.capture_one does (its
     record_until_enough for the short holds, a fixed length for today's),
-    without writing the pose folder.
+    without writing the pose folder. keep: a dict that receives the averaged
+    frames by kind (rotstar, identity, checkerboard), the full scale and the
+    detection's refinement windows.
     """
     a = cli_args(hold)
     nframes = frames_per_recording(a, entry_holds(LOOP, hold), FPS)
@@ -87,6 +89,11 @@ def one_recording(E, hold, flaws: Flaws, rng, blend_z: float = Options.content_b
     except SegmentError:
         return None, np.nan, np.nan
     r = quick_check(seg, LAYOUT, PATTERN, src.full_scale)
+    if keep is not None:
+        for kind in ("rotstar", "identity", "checkerboard"):
+            keep[kind] = np.stack([seg.images[f["file"]] for f in PATTERN["frames"] if f["kind"] == kind])
+        keep["full_scale"] = src.full_scale
+        keep["window"] = r.window
     if not r.found:
         return None, np.nan, np.nan
     used = seg.used or {f: list(range(*rg)) for f, rg in seg.ranges.items()}

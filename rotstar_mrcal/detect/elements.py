@@ -21,11 +21,14 @@ refused (indexing.handedness_reason): its codes label it, but no board pose
 mrcal can fit (a rotation) gives a mirrored board.
 
 The refinement window of a corner is 0.65 x the half-side of the largest
-square about it inside its element, capped at `window` (pipeline.py). For an
-element cut by the image edge the square is measured as if the element went
-on beyond the edge, and the corner is kept only when that window, plus one
-pixel, lies inside the image: a corner near the edge gets the same window
-as any other or none.
+square about it inside its element, capped at `window` (pipeline.py): the
+element's square as the homography of the corners labelled around it
+projects it (grid_windows), or, where too few are labelled, the square
+inside the element's region of pixels (window_of), which moves with the
+frames' noise. For an element cut by the image edge the square is measured
+as if the element went on beyond the edge, and the corner is kept only when
+that window, plus one pixel, lies inside the image: a corner near the edge
+gets the same window as any other or none.
 """
 
 from __future__ import annotations
@@ -84,6 +87,63 @@ def window_of(contour: np.ndarray, centre: np.ndarray, shape, window: float) -> 
     inner = ~on_border(contour, shape)
     half = inscribed_square(contour[inner] if inner.any() else contour, centre) + REGION_EDGE_PX
     return float(np.clip(WINDOW_FRACTION * half, MIN_WINDOW, window))
+
+
+def square_in_quad(quad: np.ndarray, centre: np.ndarray) -> float:
+    """Half-side of the largest axis-aligned square about centre inside the convex quadrilateral quad (4, 2)
+
+    Each edge, a line n . x = c with n its inward normal, bounds the square's
+    half-side by (n . centre - c) / (|n_x| + |n_y|) (the square's nearest
+    corner touches it); the least of the four bounds.
+
+    >>> square_in_quad(np.array([[0.0, 0], [10, 0], [10, 6], [0, 6]]), np.array([5.0, 3.0]))
+    3.0
+    >>> round(square_in_quad(np.array([[0.0, -5], [5, 0], [0, 5], [-5, 0]]), np.zeros(2)), 6)   # a diamond
+    2.5
+    """
+    a = np.asarray(quad, float)
+    e = np.roll(a, -1, axis=0) - a
+    n = np.stack((-e[:, 1], e[:, 0]), axis=-1)
+    n *= np.sign(np.sum(n * (a.mean(axis=0) - a), axis=-1))[:, None]  # inward, whichever the winding
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return float(np.min(np.sum(n * (np.asarray(centre, float) - a), axis=-1) / np.abs(n).sum(axis=-1)))
+
+
+def grid_windows(labels: np.ndarray, corners: np.ndarray, layout: Layout, window: float) -> np.ndarray:
+    """(N,) each corner's refinement half-window from the labelled grid; NaN where it cannot be measured so
+
+    WINDOW_FRACTION x the half-side of the largest axis-aligned square about
+    the corner inside its element (layout.half_element display px about it),
+    the element projected by the homography of the corners labelled within
+    one grid step of it (itself included; at least 4, not all on one line),
+    between MIN_WINDOW and `window` px: the detector's estimate of
+    simulate.visibility.true_windows. Unlike the square inside an element's
+    region of pixels, it does not jump by a pixel when the frames' noise
+    moves one pixel of the region's edge (issue 23: the window's draw moved
+    a small element's corner by 0.01 px).
+
+    >>> from rotstar_mrcal.pattern.layout import make_layout
+    >>> L = make_layout(screen=(800, 600), pitch=100, band=24)         # half_element 38 display px
+    >>> lab = np.array([[i, j] for j in range(2) for i in range(3)])
+    >>> grid_windows(lab, lab * [20.0, 10.0] + 50, L, 10.0).round(2)  # 20 / 10 px per grid step
+    array([2.47, 2.47, 2.47, 2.47, 2.47, 2.47])
+    """
+    labels = np.asarray(labels, int)
+    q = np.asarray(corners, float)
+    h = layout.half_element / layout.pitch
+    quad = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+    out = np.full(len(labels), np.nan)
+    ok = np.isfinite(q).all(axis=1)
+    for n in np.flatnonzero(ok):
+        near = ok & (np.abs(labels - labels[n]).max(axis=1) <= 1)
+        if near.sum() < 4 or len(np.unique(labels[near, 0])) < 2 or len(np.unique(labels[near, 1])) < 2:
+            continue
+        H, _ = cv2.findHomography(labels[near].astype(np.float64), q[near], 0)
+        if H is None:
+            continue
+        p = cv2.perspectiveTransform(np.vstack((labels[n], labels[n] + quad))[None].astype(np.float64), H)[0]
+        out[n] = WINDOW_FRACTION * square_in_quad(p[1:], p[0])
+    return np.where(np.isfinite(out), np.clip(out, MIN_WINDOW, window), np.nan)
 
 
 def inside_image(points: np.ndarray, w: np.ndarray, shape) -> np.ndarray:
@@ -194,7 +254,8 @@ def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window
         return no_board(f"only {keep.sum()} elements whose identities agree with the image" + (
             f" ({next(iter(rejected.values()))})" if rejected else ""))
     labels, rough, cs = labels[keep], rough[keep], [c for c, k in zip(cs, keep) if k]
-    w = np.array([window_of(c, q, (H, W), window) for c, q in zip(cs, rough)])
+    w = grid_windows(labels, rough, layout, window)
+    w = np.where(np.isfinite(w), w, [window_of(c, q, (H, W), window) for c, q in zip(cs, rough)])
     inside = inside_image(rough, w, (H, W))
     for lab in labels[~inside]:
         rejected[tuple(lab)] = "refinement window leaves the image"
@@ -271,5 +332,6 @@ def by_graph(frames: np.ndarray, layout: Layout, window: float) -> LabelledEleme
     why = mirror_reason(frame_angles(frames, grid_array(labels, rough, layout.nx, layout.ny), hef), layout.step)
     if why:
         return no_board(why)
-    w = np.clip(WINDOW_FRACTION * inscribed, MIN_WINDOW, window)
+    w = grid_windows(labels, rough, layout, window)
+    w = np.where(np.isfinite(w), w, np.clip(WINDOW_FRACTION * inscribed, MIN_WINDOW, window))
     return LabelledElements(labels, rough + off, w)

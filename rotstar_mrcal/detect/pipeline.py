@@ -34,7 +34,8 @@ elements: centroid 0.1 px median error, curve intersection 0.3 px, both well
 inside the refinement's reach and giving identical refined corners).
 
 The refinement window is capped per corner at 0.65 x the half-side of the
-largest square inside the element's boundary, so that the symmetric window
+largest square inside the element's boundary (projected by the labelled
+grid's local homography, elements.grid_windows), so that the symmetric window
 never reaches the border band or the neighbouring elements (whose crossings
 are centres of symmetry too, and would attract the corner).
 
