@@ -179,14 +179,15 @@ def grid_jacobian(corners: np.ndarray, pitch: float) -> np.ndarray:
     return np.stack((gx, gy), axis=-1)
 
 
-def true_kernels(psf, xy: np.ndarray, s: int = 4, quantum: float = 16.0) -> np.ndarray:
+def true_kernels(psf, xy: np.ndarray, s: int = 4, quantum: float = 1.0) -> np.ndarray:
+    """(N, k, k) the lens's PSFs of the light at points xy (N, 2) (LensPSF.local_kernel; positions rounded to
+    `quantum` px), padded to one size; a number: that Gaussian's"""
     if len(xy) == 0:
         return np.zeros((0, 1, 1))
-    """(N, k, k) the lens's kernels at points xy (N, 2) (positions rounded to `quantum` px), padded to one size"""
-    if not hasattr(psf, "_built"):
+    if not hasattr(psf, "local_kernel"):
         from rotstar_mrcal.optics.psf import gaussian_psf
         return np.broadcast_to(gaussian_psf(float(psf), s), (len(xy),) + gaussian_psf(float(psf), s).shape).copy()
-    ks = [psf._built().kernel_at(*(np.round(p / quantum) * quantum), s) for p in xy]
+    ks = [psf.local_kernel(*(np.round(p / quantum) * quantum), s) for p in xy]
     m = max(k.shape[0] for k in ks)
     out = np.zeros((len(ks), m, m))
     for i, k in enumerate(ks):
@@ -284,9 +285,10 @@ def check_blur_map(path, coma, focus, imagersize=(1280, 800)):
     truth = {}
     tw, ta = np.empty(len(t)), np.empty(len(t))
     for n, (x, y, *_, reach) in enumerate(t):
-        key = (int(x // 64), int(y // 64), reach)  # LensPSF's tiles are 64 px
+        key = (int(x // 8), int(y // 8), reach)  # (the lens's PSF changes little over 8 px)
         if key not in truth:
-            e = psf_estimate(projected_moments(lens._built().kernel_at(x, y, 4), 4, normals, reach))
+            e = psf_estimate(projected_moments(lens.local_kernel(x // 8 * 8 + 4, y // 8 * 8 + 4, 4), 4, normals,
+                                               reach))
             truth[key] = (e.width[0], e.coma_angle[0])
         tw[n], ta[n] = truth[key]
     ratio = t[:, 2] / tw
