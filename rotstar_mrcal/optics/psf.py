@@ -35,8 +35,8 @@ pixels long). The kernel follows the orientation of simulate.optics
 (tap [r, c] moves light r - h//2 sub-pixels down and c - w//2 right): it
 plugs into the foundation's renderer as `psf=kernel` (KernelPSF), as
 `psf=SeidelPSF(...)` (any supersampling), or field-dependent as
-`psf=radial_psf(...)` (TiledPSF, coma and astigmatism along the field
-radius).
+`psf=radial_psf(...)` (SmoothPSF, coma and astigmatism along the field
+radius, the PSF changing continuously over the field).
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ import math
 
 import numpy as np
 
-from rotstar_mrcal.optics.blur import TiledPSF, convolve
+from rotstar_mrcal.optics.blur import SmoothPSF, convolve
 from rotstar_mrcal.optics.wavefront import Seidel, pupil_function
 
 DEFAULT_TAIL = 2e-3
@@ -236,8 +236,8 @@ class SeidelPSF:
         return {"kind": "seidel", "seidel": self.seidel.to_dict(), "optics": self.optics.to_dict()}
 
 
-def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, tile_px: int = 64,
-               field_radius_px: float | None = None, tail: float = DEFAULT_TAIL) -> TiledPSF:
+def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, node_px: int = 64,
+               field_radius_px: float | None = None, tail: float = DEFAULT_TAIL) -> SmoothPSF:
     """A field-dependent wavefront PSF: coma and astigmatism point along the field radius
 
     SYNOPSIS
@@ -245,18 +245,19 @@ def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, tile_px: in
         >>> import numpy as np
         >>> from rotstar_mrcal.optics.wavefront import Seidel
         >>> from rotstar_mrcal.optics.psf import radial_psf
-        >>> psf = radial_psf(Seidel(coma=2.0), centre=(64, 64), tile_px=32)
+        >>> psf = radial_psf(Seidel(coma=2.0), centre=(64, 64), node_px=32)
         >>> out = psf(np.ones((1, 512, 512), np.float32), (0, 0), 4)
         >>> bool(np.allclose(out, 1, atol=1e-5))          # flat stays flat
         True
 
-    The tile with centre (x, y) gets `seidel` turned by the azimuth of
+    The kernel at (x, y) (SmoothPSF's nodes, every node_px pixels, blended
+    bilinearly between them) is that of `seidel` turned by the azimuth of
     (x, y) - centre (image direction; so the comet's tail points away from
     `centre` when seidel.coma > 0). With field_radius_px the Seidel field
     dependence is applied with h = |(x, y) - centre| / field_radius_px:
     tilt and coma scale with h, focus and astigmatism with h^2 (field
     curvature), spherical is constant; without it the amplitudes are constant
-    over the field. Kernels are cached per tile.
+    over the field. Kernels are cached per node.
     """
     optics = Optics() if optics is None else optics
     cx, cy = (float(v) for v in centre)
@@ -282,7 +283,7 @@ def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, tile_px: in
     worst = seidel if not field_radius_px else dataclasses.replace(
         seidel, tilt=seidel.tilt * 1.5, coma=seidel.coma * 1.5, focus=seidel.focus * 2.25,
         astigmatism=seidel.astigmatism * 2.25)
-    return TiledPSF(kernel_at, tile_px=tile_px, radius_px=geometric_radius_px(worst, optics) + 1.0)
+    return SmoothPSF(kernel_at, node_px=node_px, radius_px=geometric_radius_px(worst, optics) + 1.0)
 
 
 class LensPSF:
@@ -310,19 +311,19 @@ class LensPSF:
     model is where the light's centroid lands (what make demo does).
     """
 
-    def __init__(self, seidel: Seidel, imagersize, optics: Optics | None = None, tile_px: int = 64,
+    def __init__(self, seidel: Seidel, imagersize, optics: Optics | None = None, node_px: int = 64,
                  tail: float = DEFAULT_TAIL, tilt: float | None = None):
         self.seidel = dataclasses.replace(seidel, tilt=-seidel.coma if tilt is None else float(tilt))
         self.imagersize = tuple(int(v) for v in imagersize)
         self.optics = Optics() if optics is None else optics
-        self.tile_px, self.tail = int(tile_px), float(tail)
+        self.node_px, self.tail = int(node_px), float(tail)
         self._psf = None
 
-    def _built(self) -> TiledPSF:
+    def _built(self) -> SmoothPSF:
         if self._psf is None:
             W, H = self.imagersize
             c = ((W - 1) / 2, (H - 1) / 2)
-            self._psf = radial_psf(self.seidel, c, self.optics, self.tile_px, math.hypot(*c), self.tail)
+            self._psf = radial_psf(self.seidel, c, self.optics, self.node_px, math.hypot(*c), self.tail)
         return self._psf
 
     def __getstate__(self):
@@ -335,6 +336,13 @@ class LensPSF:
     def __call__(self, sub, origin, s):
         return self._built()(sub, origin, s)
 
+    def pixels(self, sub, origin, s):
+        return self._built().pixels(sub, origin, s)
+
+    def local_kernel(self, x: float, y: float, s: int) -> np.ndarray:
+        """The PSF of the light from image point (x, y) (SmoothPSF.local_kernel)"""
+        return self._built().local_kernel(x, y, s)
+
     def describe(self):
         return {"kind": "seidel-field", "seidel_at_corners": self.seidel.to_dict(), "optics": self.optics.to_dict(),
-                "imagersize": list(self.imagersize), "tile_px": self.tile_px}
+                "imagersize": list(self.imagersize), "node_px": self.node_px}

@@ -35,7 +35,8 @@ positions are then quantised to 1/s px).
 
 The supersampled image is convolved with the PSF (optics.as_psf: None, a
 Gaussian sigma in camera pixels, a sub-pixel kernel or a callable) and each
-s x s block is averaged into a camera pixel.
+s x s block is averaged into a camera pixel (a PSF with a `pixels` method,
+optics.SmoothPSF, does both at once).
 
 Only the region of interest is traced: the camera pixels whose rays land on
 the screen (found from the cached per-pixel rays), plus one pixel and the
@@ -249,7 +250,7 @@ def render_irradiance(
         x0, y0, x1, y1 = roi
         u, v = board_hits(subpixel_rays(grid, x0, y0, x1, y1, s), rt_g, screen.layout, glass)
         sub = sample_screen(screen, u, v, frames, sampling)
-        px = block_average(op(sub, (x0, y0), s), s)
+        px = op.pixels(sub, (x0, y0), s) if hasattr(op, "pixels") else block_average(op(sub, (x0, y0), s), s)
         cx0, cy0, cx1, cy1 = max(x0, 0), max(y0, 0), min(x1, W), min(y1, H)
         if cx1 <= cx0 or cy1 <= cy0:
             continue

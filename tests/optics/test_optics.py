@@ -13,7 +13,7 @@ from rotstar_mrcal.optics import (
 )
 from rotstar_mrcal.optics.wavefront import wavefront
 from rotstar_mrcal.optics.crlb import crlb_cov
-from rotstar_mrcal.optics.blur import KernelPSF
+from rotstar_mrcal.optics.blur import KernelPSF, SmoothPSF
 from rotstar_mrcal.synth.bound import pattern_bounds
 
 OPTICS = Optics()  # F/2, 3 um, 550 nm: lambda N / p = 0.3667 px
@@ -126,7 +126,7 @@ def test_seidel_psf_plugs_into_the_renderer_interface():
 
 
 def test_radial_psf_points_coma_away_from_the_centre():
-    """TiledPSF with per-tile orientation: the blurred dot's centroid moves radially outward"""
+    """SmoothPSF with per-node orientation: the blurred dot's centroid moves radially outward"""
     s, tile = 4, 32
     H = W = 192
     sub = np.zeros((1, H * s, W * s), np.float32)
@@ -138,7 +138,7 @@ def test_radial_psf_points_coma_away_from_the_centre():
         r, c = int((y + 0.5) * s), int((x + 0.5) * s)
         sub[0, r, c] = 1.0
         at.append((xx[r, c], yy[r, c]))
-    out = radial_psf(Seidel(coma=3.0), centre, OPTICS, tile_px=tile)(sub, (0, 0), s)[0]
+    out = radial_psf(Seidel(coma=3.0), centre, OPTICS, node_px=tile)(sub, (0, 0), s)[0]
     for x, y in at:
         m = (abs(xx - x) < 12) & (abs(yy - y) < 12)
         w = out * m
@@ -202,3 +202,27 @@ def test_bound_is_a_floor_for_the_symmetric_refiner():
     rms = np.sqrt(np.mean(np.sum((q - apex) ** 2, axis=-1)))
     assert rms >= 0.85 * bound  # a lower bound (0.85: Monte Carlo error of 150 repeats)
     assert rms <= 2.0 * bound
+
+
+def test_smooth_psf_is_continuous_exact_and_independent_of_the_region():
+    """SmoothPSF: a point's light has the blended kernel's centroid (continuous in the point, 0 for the lens's
+    tilt-compensated coma), its camera pixels are the reference's block means, and they do not depend on where
+    the rendered region starts (TiledPSF's tiles did)"""
+    s, N = 4, 16
+    psf = radial_psf(Seidel(coma=1.5, tilt=-1.5), (40.0, 40.0), OPTICS, node_px=N, field_radius_px=60.0)
+    for x in (50.0, 55.3, 61.9):  # across a node at 63.5: the centroid stays put (tilt + coma = 0)
+        assert np.abs(centroid_px(psf.local_kernel(x, 45.0, s), s)).max() < 0.02
+    sub = np.zeros((1, 32 * s, 40 * s), np.float32)
+    sub[0, 12 * s + 1, 14 * s + 2] = 1.0  # the light of image point (54.125, 41.875), region at (40, 30)
+    yy, xx = np.mgrid[0:32, 0:40]
+    cs = []
+    for dx, dy in ((0, 0), (-3, -5)):  # the same light in a region that starts elsewhere
+        moved = np.roll(sub, (-4 * dy, -4 * dx), axis=(1, 2))
+        px = psf.pixels(moved, (40 + dx, 30 + dy), s)
+        assert np.abs(px - psf(moved, (40 + dx, 30 + dy), s).reshape(1, 32, s, 40, s).mean(axis=(2, 4))).max() < 1e-6
+        cs.append(((px[0] * (xx + 40 + dx)).sum() / px.sum(), (px[0] * (yy + 30 + dy)).sum() / px.sum()))
+    assert np.allclose(cs[0], cs[1], atol=1e-5)
+    full = psf(sub, (40, 30), s)[0]  # the supersampled light's centroid: the point's (the pixels' is not quite)
+    ys, xs = 30 - 0.5 + (np.arange(32 * s) + 0.5) / s, 40 - 0.5 + (np.arange(40 * s) + 0.5) / s
+    c = ((full.sum(axis=0) * xs).sum(), (full.sum(axis=1) * ys).sum())
+    assert abs(full.sum() - 1) < 1e-5 and np.allclose(c, (54.125, 41.875), atol=0.02)

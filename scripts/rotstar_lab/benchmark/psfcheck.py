@@ -3,7 +3,8 @@
 SYNOPSIS
 
     nice -n 10 .venv/bin/python -m rotstar_lab.benchmark.psfcheck --coma 2.5 --focus 0.3 --npose 4
-    (PYTHONPATH=scripts; renders are cached in --cache, default /tmp/rotstar-psfcheck)
+    (PYTHONPATH=scripts; renders are cached in --cache, default /tmp/rotstar-psfcheck-smooth: the lens's PSF
+    blended between nodes, optics.SmoothPSF; /tmp/rotstar-psfcheck holds the former 64-px tiles' renders)
 
 The scene of the failure tables (failures.py): the d435 preset, make demo's
 lens (optics.LensPSF, coma and focus in waves at the image corners; the
@@ -31,6 +32,12 @@ a field of degree D between), simbias-moments-L (a Gram-Charlier kernel of
 the true kernel's moments clipped to L px, 0: edgespread's reach),
 simbias-est (psf-sim's estimate with the true geometry). --noise 0 renders
 noiseless frames, --no-display-maps leaves the per-frame display maps out.
+The floor's suspects (doc/blur-map.md): --tiled PX renders through the
+former piecewise-constant PSF (optics.TiledPSF, PX-px tiles from the rendered
+region's corner; simbias-true then takes the Seidel kernel at the corner),
+--tap-floor F and --star-fft change psfbias's own approximations (the
+kernel taps left out; the FFT rendering of the local star instead of the
+binned one).
 
 Printed: per method the RMS of the corner error against the truth, and its
 pose-dependent part: the error minus the mean error of its image cell
@@ -52,7 +59,9 @@ from rotstar_mrcal import simulate
 from rotstar_mrcal.detect.blurmap import read_table
 from rotstar_mrcal.detect.edgespread import projected_moments, psf_estimate
 from rotstar_mrcal.detect.pipeline import detect_pose
+from rotstar_mrcal.detect import psfbias
 from rotstar_mrcal.detect.psfbias import bias_correct, coma_samples, simulated_bias, spread_nodes, star_normals
+from rotstar_mrcal.optics.blur import TiledPSF, normalize_kernel
 from rotstar_mrcal.optics.psf import LensPSF
 from rotstar_mrcal.optics.wavefront import Seidel
 from rotstar_mrcal.peers.checkerboard import refine_by_window, saddle_refine
@@ -78,6 +87,22 @@ def render(model, layout, rt, psf, path):
     rot, cb = E[kinds == "rotstar"], E[kinds == "checkerboard"][0]
     np.savez(path, rot=rot, cb=cb)
     return rot, cb
+
+
+class TiledLens:
+    """A LensPSF rendered as the simulator did before SmoothPSF: px-px tiles from the region's corner"""
+
+    def __init__(self, lens: LensPSF, px: int):
+        self.lens = lens
+        self.tiled = TiledPSF(lens._built().kernel_at, px, lens.radius_px)
+        self.radius_px = lens.radius_px
+
+    def __call__(self, sub, origin, s):
+        return self.tiled(sub, origin, s)
+
+    def local_kernel(self, x, y, s):
+        """The Seidel kernel at (x, y) (what a corner at its tile's centre is blurred by)"""
+        return normalize_kernel(self.lens._built().kernel_at(x, y, s))
 
 
 def pose_dependent(pos, err):
@@ -179,14 +204,15 @@ def grid_jacobian(corners: np.ndarray, pitch: float) -> np.ndarray:
     return np.stack((gx, gy), axis=-1)
 
 
-def true_kernels(psf, xy: np.ndarray, s: int = 4, quantum: float = 16.0) -> np.ndarray:
+def true_kernels(psf, xy: np.ndarray, s: int = 4, quantum: float = 1.0) -> np.ndarray:
+    """(N, k, k) the lens's PSFs of the light at points xy (N, 2) (LensPSF.local_kernel; positions rounded to
+    `quantum` px), padded to one size; a number: that Gaussian's"""
     if len(xy) == 0:
         return np.zeros((0, 1, 1))
-    """(N, k, k) the lens's kernels at points xy (N, 2) (positions rounded to `quantum` px), padded to one size"""
-    if not hasattr(psf, "_built"):
+    if not hasattr(psf, "local_kernel"):
         from rotstar_mrcal.optics.psf import gaussian_psf
         return np.broadcast_to(gaussian_psf(float(psf), s), (len(xy),) + gaussian_psf(float(psf), s).shape).copy()
-    ks = [psf._built().kernel_at(*(np.round(p / quantum) * quantum), s) for p in xy]
+    ks = [psf.local_kernel(*(np.round(p / quantum) * quantum), s) for p in xy]
     m = max(k.shape[0] for k in ks)
     out = np.zeros((len(ks), m, m))
     for i, k in enumerate(ks):
@@ -233,7 +259,8 @@ def simbias_true(pc, truth, psf, layout, reach=None) -> np.ndarray:
 
 def samples_from(model, layout, psf, a, dist, fs, mc):
     """coma_samples of the poses at distances dist (near, far), the same lens, npose and seed (renders cached)"""
-    tag = (f"g{a.gaussian:g}" if a.gaussian > 0 else f"c{a.coma:g}f{a.focus:g}") + f"-d{dist[0]:g},{dist[1]:g}"
+    tag = f"g{a.gaussian:g}" if a.gaussian > 0 else f"c{a.coma:g}f{a.focus:g}" + (f"-tiled{a.tiled}" if a.tiled else "")
+    tag += f"-d{dist[0]:g},{dist[1]:g}"
     xy, vec = [], []
     for i, rt in enumerate(simulate.random_poses(model, layout, a.npose, np.random.default_rng([3, a.seed]),
                                                  distance=dist)):
@@ -284,9 +311,10 @@ def check_blur_map(path, coma, focus, imagersize=(1280, 800)):
     truth = {}
     tw, ta = np.empty(len(t)), np.empty(len(t))
     for n, (x, y, *_, reach) in enumerate(t):
-        key = (int(x // 64), int(y // 64), reach)  # LensPSF's tiles are 64 px
+        key = (int(x // 8), int(y // 8), reach)  # (the lens's PSF changes little over 8 px)
         if key not in truth:
-            e = psf_estimate(projected_moments(lens._built().kernel_at(x, y, 4), 4, normals, reach))
+            e = psf_estimate(projected_moments(lens.local_kernel(x // 8 * 8 + 4, y // 8 * 8 + 4, 4), 4, normals,
+                                               reach))
             truth[key] = (e.width[0], e.coma_angle[0])
         tw[n], ta[n] = truth[key]
     ratio = t[:, 2] / tw
@@ -318,7 +346,11 @@ def main(argv=None):
                    help="scale of the read noise (1 %%) and shot noise (1e-4); 0: noiseless frames, whose "
                         "pose-dependent error is the methods' own")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--cache", default="/tmp/rotstar-psfcheck")
+    p.add_argument("--cache", default="/tmp/rotstar-psfcheck-smooth")
+    p.add_argument("--tiled", type=int, default=0, metavar="PX",
+                   help="render through the former piecewise-constant PSF (TiledPSF, PX-px tiles)")
+    p.add_argument("--tap-floor", type=float, help="psfbias.TAP_FLOOR (0: every kernel tap)")
+    p.add_argument("--star-fft", action="store_true", help="psfbias renders the local star by FFT (render_star_fft)")
     p.add_argument("--methods", default="symmetric,psf,saddle")
     p.add_argument("--distance", default="", help="near,far metres (default: random_poses' range)")
     p.add_argument("--coma-from", metavar="NEAR,FAR",
@@ -338,6 +370,12 @@ def main(argv=None):
     layout = paper_layout()
     psf = a.gaussian if a.gaussian > 0 else LensPSF(Seidel(coma=a.coma, focus=a.focus), model.imagersize())
     tag = f"g{a.gaussian:g}" if a.gaussian > 0 else f"c{a.coma:g}f{a.focus:g}"
+    if a.tiled and a.gaussian <= 0:
+        psf, tag = TiledLens(psf, a.tiled), tag + f"-tiled{a.tiled}"
+    if a.tap_floor is not None:
+        psfbias.TAP_FLOOR = a.tap_floor
+    if a.star_fft:
+        psfbias.render_star = psfbias.render_star_fft
     dist = tuple(float(v) for v in a.distance.split(",")) if a.distance else None
     rts = simulate.random_poses(model, layout, a.npose, np.random.default_rng([3, a.seed]), distance=dist)
     if dist:

@@ -119,7 +119,7 @@ def coma_psf(imagersize):
     W, H = imagersize
     centre = ((W - 1) / 2, (H - 1) / 2)
     return radial_psf(Seidel(coma=COMA_WAVES, tilt=-COMA_WAVES, focus=FOCUS_WAVES), centre, Optics(),
-                      tile_px=64, field_radius_px=math.hypot(*centre))
+                      node_px=64, field_radius_px=math.hypot(*centre))
 
 
 def setup_notes(npose, reach) -> str:
