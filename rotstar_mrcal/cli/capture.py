@@ -286,9 +286,17 @@ def frames_per_recording(a, holds, fps: float) -> int:
 
 
 def first_look(a, pattern: dict, fps: float) -> int:
-    """--until-enough's first recording: one loop of the player and its two longest entries, in camera frames"""
+    """--until-enough's first recording, in camera frames: one loop of the player and two camera frames
+
+    The entry the recording starts in is seen at both ends, in two pieces
+    that together hold its whole time but for one more change of the
+    displayed frame (a camera frame or two lost to it): the two camera
+    frames. Measured: one loop and 5 refreshes keep as many poses as one
+    loop and two entries (tests/capture/test_timing_flaws.py).
+    """
     holds = entry_holds(player_loop(pattern["frames"]), a.hold)
-    return int(np.ceil((holds.sum() + 2 * holds.max()) / a.refresh * (fps or 25.0)))
+    fps = fps or 25.0
+    return int(np.ceil(holds.sum() / a.refresh * fps)) + 2
 
 
 def default_controls(a) -> tuple[float | None, str]:

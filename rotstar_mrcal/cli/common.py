@@ -321,5 +321,5 @@ def hold_arg(s: str) -> int | None:
 
 
 HOLD_HELP = ("the player's hold, display refreshes per frame; 'short' holds each frame kind for its own time "
-             "(the rotating star 9, the identity frames, the checkerboard and the start marker 6: "
-             "pattern.loop.SHORT_HOLDS, a 2.7 s loop of the default sequence at 60 Hz)")
+             "(the rotating star 11, the identity frames and the checkerboard 6, the start marker 3: "
+             "pattern.loop.SHORT_HOLDS, a 2.9 s loop of the default sequence at 60 Hz)")

@@ -91,25 +91,28 @@ def frame_level(layout: Layout, frame: dict) -> float:
     return float(np.mean(render_frame(layout, frame)))
 
 
-SHORT_HOLDS = {"rotstar": 9, "identity": 6, "checkerboard": 6, "start-marker": 6}
+SHORT_HOLDS = {"rotstar": 11, "identity": 6, "checkerboard": 6, "start-marker": 3}
 """Display refreshes per frame kind for a short capture (60 Hz): measured with the capture's simulated camera,
 every timing flaw on (tests/capture/test_timing_flaws.py): at 25 fps with 8 ms exposures, 6 refreshes (100 ms)
 give two consecutive clean camera frames of an entry in 96 % of the passes (5: 65 %, 4: 29 %), at 30 fps 97 %
-(5: 95 %); the rotating-star frames, which the corners are measured on, get 9 (150 ms, about three clean camera
-frames at 25 fps). One loop of the default sequence: 8 x 9 + 13 x 6 + 6 + 6 = 162 refreshes, 2.7 s."""
+(5: 95 %), so every frame that is only read (identity, checkerboard) gets 6; the start marker, which the split by
+content does not need, 3; the rotating-star frames, whose camera frames are averaged for the corners, the rest
+of a 3 s look: 11 (183 ms, about four clean camera frames at 25 fps, five at 30). One loop of the default
+sequence: 8 x 11 + 13 x 6 + 6 + 3 = 175 refreshes, 2.9 s; with --until-enough's two more camera frames 3.0 s at
+25 fps."""
 
 
 def entry_holds(loop: list[dict], hold: int | None = None, kind_holds: dict | None = None,
                 marker_hold: int | None = None) -> np.ndarray:
     """(len(loop),) display refreshes each loop entry is held
 
-    hold: every kind's hold (None: SHORT_HOLDS per kind, hold 9 for kinds it
-    does not list); kind_holds: {kind: refreshes} over that; marker_hold: the
+    hold: every kind's hold (None: SHORT_HOLDS per kind, the rotating star's
+    for kinds it does not list); kind_holds: {kind: refreshes} over that; marker_hold: the
     start marker's (None: as its kind says).
 
     >>> loop = player_loop([{"file": "a", "kind": "rotstar"}, {"file": "b", "kind": "identity"}])
     >>> entry_holds(loop, 30).tolist(), entry_holds(loop).tolist(), entry_holds(loop, 30, {"identity": 6}, 45).tolist()
-    ([30, 30, 30], [6, 9, 6], [45, 30, 6])
+    ([30, 30, 30], [3, 11, 6], [45, 30, 6])
     """
     base = dict(SHORT_HOLDS) if hold is None else {}
     base.update(kind_holds or {})

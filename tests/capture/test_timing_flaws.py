@@ -2,9 +2,10 @@
 
 Each recording: the capture's simulated camera (capture.simulated.record_player,
 the code path rotstar-simulate --recording writes) filming the looping player
-(20 entries, held as pattern.loop.SHORT_HOLDS says: the rotating star 9 refreshes at 60 Hz, 150 ms, the
-rest 6, 100 ms; 2.35 s a loop) at 25 fps, 8 ms exposures, for
-one loop and two entries from a random point of the loop, with every flaw on
+(20 entries, held as pattern.loop.SHORT_HOLDS says: the rotating star 11 refreshes at 60 Hz, 183 ms, the
+identity frames and the checkerboard 6, 100 ms, the start marker 3; 2.6 s a loop) at 25 fps, 8 ms exposures,
+for --until-enough's first look (one loop and two camera frames) from a random point of the loop, with every
+flaw on
 (simulated.ALL_FLAWS: the panel scanning out over a refresh, a 5 ms LCD
 response, a 480 Hz PWM backlight, the browser a refresh late or early, the
 driver losing frames, the camera's clock drifting). Tiny images (a quarter of
@@ -44,7 +45,7 @@ from rotstar_mrcal.pattern.loop import entry_holds, player_loop
 LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)
 LOOP = player_loop(LAYOUT.frames())
 N = len(LOOP)
-HOLDS = entry_holds(LOOP)  # the player's holds for a short capture: 9 refreshes the rotating star, 6 the rest
+HOLDS = entry_holds(LOOP)  # the player's holds for a short capture: the rotating star 11 refreshes, the rest 6 (marker 3)
 FPS, EXPOSURE = 25.0, 0.008
 BLEND, CLEAN = 0.1, 0.02
 
@@ -66,7 +67,7 @@ def one(E, s: int, opts: Options = Options(method="content")):
     """One flawed recording and its split: (kept, missing files by truth, accepted frames of another entry,
     accepted blends, largest accepted impurity)"""
     rng = np.random.default_rng([7, s])
-    T = int((HOLDS.sum() + 2 * HOLDS.max()) / 60 * FPS)  # one loop and two entries
+    T = int(np.ceil(HOLDS.sum() / 60 * FPS)) + 2  # one loop and two camera frames (cli.capture.first_look)
     truth: list = []
     frames, seq = record_player(E, HOLDS, T, ALL_FLAWS, fps=FPS, exposure_s=EXPOSURE, start_entry=int(rng.integers(N)),
                                 start_phase=float(rng.uniform()), rng=rng, truth=truth, noise=0.01)
@@ -188,7 +189,7 @@ def test_short_holds_with_flaws_through_the_commands(tmp_path, run_cli):
     rec = flawed_recording(tmp_path, run_cli, loops=1, poses=1, seed=4)
     meta = json.loads(rec.with_suffix(".json").read_text())
     first = tmp_path / "first.npy"
-    n = int((2 * HOLDS.sum() + 2 * HOLDS.max()) / 60 * FPS)  # two loops and two entries (5.1 s)
+    n = int((2 * HOLDS.sum() + 2 * HOLDS.max()) / 60 * FPS)  # two loops and two entries (5.6 s)
     np.save(first, np.load(rec, mmap_mode="r")[15:15 + n])  # from wherever the loop is 0.6 s in
     (tmp_path / "first.json").write_text(json.dumps({"sequence": meta["sequence"][15:15 + n], "fps": meta["fps"]}))
     r = run_cli("rotstar-segment", first, "--pattern", tmp_path / "pattern", "--out", tmp_path / "seq" / "pose000",

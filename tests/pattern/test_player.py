@@ -426,7 +426,7 @@ def test_paper_sequence_pixel_exact(ipad_paper, browsers):
 def test_playback_holds_per_kind(tmp_path, browsers):
     """The identity frames held shorter than the rotating star (the config's kind holds, and from the URL)"""
     from rotstar_mrcal.pattern.layout import make_layout
-    from rotstar_mrcal.pattern.loop import entry_holds
+    from rotstar_mrcal.pattern.loop import SHORT_HOLDS, entry_holds
 
     layout = make_layout(screen=(480, 420), pitch=60, band=16)
     d = layout.to_dict()
@@ -436,7 +436,8 @@ def test_playback_holds_per_kind(tmp_path, browsers):
     b.emulate(480, 420, 1)
     for k, (url, want) in enumerate((("#play", entry_holds(player_loop(d["frames"]))),
                                      ("#play&hold=4&identityhold=2",
-                                      entry_holds(player_loop(d["frames"]), 4, {"identity": 2}, 6)))):
+                                      entry_holds(player_loop(d["frames"]), 4, {"identity": 2},
+                                                  SHORT_HOLDS["start-marker"])))):
         (tmp_path / f"p{k}.html").write_text(html)  # (another file: a new hash alone does not load the page)
         st = b.load((tmp_path / f"p{k}.html").as_uri() + url)
         assert st["holds"] == want.tolist(), (url, st["holds"])
