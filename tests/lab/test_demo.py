@@ -115,7 +115,10 @@ def test_capture_pose_with_the_paper_sequence(tmp_path):
             corners, _, why = found[m]
             assert corners is not None, (label, m, why)
             d = np.linalg.norm(corners - truth, axis=-1)
-            assert np.nanmax(d) < 0.3 and np.isfinite(d).mean() > 0.9, (label, m, np.nanmax(d))
+            # near the truth: a wrong board is MATCH_PX = 3 px off. The star's one noisy frame in rotstar's windows
+            # (grid_windows since e29194d) has its median at 0.03-0.08 px and a worst corner up to 0.35 px here
+            assert np.nanmax(d) < 0.5 and np.nanmedian(d) < 0.1 and np.isfinite(d).mean() > 0.9, (
+                label, m, np.nanmax(d), np.nanmedian(d))
     sat = scene.EXPOSURES[-1][0]
     assert "saturated" in " ".join(r.rejected[sat]["phase"].ravel())
     assert not any(r.rejected[sat]["phase-keep"].ravel())
