@@ -147,17 +147,28 @@ def calibrate(seq: str) -> dict:
                      text=True)
     if r.returncode:
         raise RuntimeError(f"rotstar-detect {seq}: {r.stderr.strip()[-2000:]}")
-    cal = seq + "-cal"
-    c = run_tool([os.path.join(bindir, "rotstar-calibrate"), seq, "--corners", vnl, "--outdir", cal,
-                  "--lensmodel", LENSMODEL, "--force", "--keep"], capture_output=True, text=True)
+    r = calibrate_corners(seq, vnl, seq + "-cal")
+    if "error" in r:
+        return r
+    return {"corner_px": corner_error(vnl, load_truth(seq)), **r}
+
+
+def calibrate_corners(seq: str, vnl: str, cal: str) -> dict:
+    """rotstar-calibrate seq on the corners file vnl into cal (OPENCV8); the model against the truth
+
+    {'boards', 'median_px' / 'worst_px': the model against the true camera,
+    'sigma_px': mrcal's median 1-sigma projection uncertainty}, or {'error': its last line}
+    """
+    c = run_tool([os.path.join(os.path.dirname(sys.executable), "rotstar-calibrate"), seq, "--corners", vnl,
+                  "--outdir", cal, "--lensmodel", LENSMODEL, "--force", "--keep"], capture_output=True, text=True)
     if c.returncode:
         return {"error": c.stderr.strip().splitlines()[-1]}
     model = mrcal.cameramodel(os.path.join(cal, "camera-0.cameramodel"))
     t = load_truth(seq)
     e = truth_error(model, t.model, truth_poses_of(model, t.rt_cam_board))
     sigma = projection_uncertainty(model, imager_grid(model.imagersize(), 20))
-    return {"boards": len(model.optimization_inputs()["rt_ref_frame"]), "corner_px": corner_error(vnl, t),
-            "median_px": e.median, "worst_px": e.max, "sigma_px": float(np.median(sigma))}
+    return {"boards": len(model.optimization_inputs()["rt_ref_frame"]), "median_px": e.median, "worst_px": e.max,
+            "sigma_px": float(np.median(sigma))}
 
 
 def render(model: mrcal.cameramodel, rt: np.ndarray) -> np.ndarray:

@@ -23,18 +23,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 
-import mrcal
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from capture_calib_bench import LAYOUT, LENSMODEL, render, say  # noqa: E402
+from capture_calib_bench import LAYOUT, calibrate_corners, render, say  # noqa: E402
 from capture_tail_lab import ideal_detection  # noqa: E402
-from rotstar_mrcal.evaluate.truth import truth_error, truth_poses_of  # noqa: E402
-from rotstar_mrcal.evaluate.uncertainty import imager_grid, projection_uncertainty  # noqa: E402
-from rotstar_mrcal.programs import run_tool  # noqa: E402
 from rotstar_mrcal.simulate.dataset import load_truth  # noqa: E402
 from rotstar_mrcal.vnl import read_corners, write_corners  # noqa: E402
 
@@ -44,17 +39,8 @@ def calibrate_with(seq: str, boards: dict, tag: str) -> dict:
     vnl = os.path.join(seq, f"corners-{tag}.vnl")
     with open(vnl, "w") as f:
         write_corners(f, list(boards.items()))
-    cal = seq + f"-cal-{tag}"
-    bindir = os.path.dirname(sys.executable)
-    c = run_tool([os.path.join(bindir, "rotstar-calibrate"), seq, "--corners", vnl, "--outdir", cal,
-                  "--lensmodel", LENSMODEL, "--force", "--keep"], capture_output=True, text=True)
-    if c.returncode:
-        return {"error": c.stderr.strip().splitlines()[-1]}
-    model = mrcal.cameramodel(os.path.join(cal, "camera-0.cameramodel"))
-    t = load_truth(seq)
-    e = truth_error(model, t.model, truth_poses_of(model, t.rt_cam_board))
-    sigma = projection_uncertainty(model, imager_grid(model.imagersize(), 20))
-    return {"median_px": e.median, "sigma_px": float(np.median(sigma))}
+    r = calibrate_corners(seq, vnl, seq + f"-cal-{tag}")
+    return r if "error" in r else {"median_px": r["median_px"], "sigma_px": r["sigma_px"]}
 
 
 def one_work(work: str, ideal_cache: dict) -> dict:
