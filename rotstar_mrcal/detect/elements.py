@@ -255,7 +255,8 @@ def by_identity(frames: np.ndarray, identity: np.ndarray, layout: Layout, window
             f" ({next(iter(rejected.values()))})" if rejected else ""))
     labels, rough, cs = labels[keep], rough[keep], [c for c, k in zip(cs, keep) if k]
     w = grid_windows(labels, rough, layout, window)
-    w = np.where(np.isfinite(w), w, [window_of(c, q, (H, W), window) for c, q in zip(cs, rough)])
+    for n in np.flatnonzero(~np.isfinite(w)):  # too few labelled neighbours: the square inside its region
+        w[n] = window_of(cs[n], rough[n], (H, W), window)
     inside = inside_image(rough, w, (H, W))
     for lab in labels[~inside]:
         rejected[tuple(lab)] = "refinement window leaves the image"
