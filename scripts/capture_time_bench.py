@@ -84,7 +84,7 @@ def one(E, truth, holds, seconds: float, fps: float, opts: Options, s: int):
     worst = 0.0
     for k in range(1, N):
         f = LOOP[k]["file"]
-        used = seg.used[f] if seg.used else range(*seg.ranges[f])
+        used = seg.used.get(f, []) if seg.used else range(*seg.ranges[f])
         for i in used:
             e, imp = tr[i]
             wrong += e != k
@@ -107,7 +107,7 @@ def row(name, holds, seconds, fps, n, poses, opts):
     print(f"  ({time.time() - t0:.0f} s)", file=sys.stderr)
 
 
-def until_enough(E, layout, fps: float, s: int) -> dict:
+def until_enough(E, layout, fps: float, s: int, extra: int = 2) -> dict:
     """One pose taken as rotstar-capture --hold short --until-enough takes it; its seconds and what was accepted"""
     loop = player_loop(layout.frames())
     holds = entry_holds(loop)
@@ -119,42 +119,45 @@ def until_enough(E, layout, fps: float, s: int) -> dict:
                                 start_entry=int(rng.integers(len(loop))), start_phase=float(rng.uniform()), rng=rng,
                                 truth=tr, noise=0.01)
     pattern = layout.to_dict()
-    opts = SessionOptions(Options(), False, first_look(a, pattern, fps))
+    opts = SessionOptions(Options(), False, first_look(a, pattern, fps) - 2 + extra)
     src = ArraySource(frames, seq, fps)
     first = src.read()
     buf = np.empty((nframes,) + first.image.shape, first.image.dtype)
     buf[0] = first.image
     got = record_until_enough(src, buf, first.sequence, pattern, layout, opts)
-    out = {"seconds": (int(got[-1]) - int(got[0]) + 1) / fps, "first": len(got) <= opts.until_enough,
-           "look": opts.until_enough / fps, "kept": False, "wrong": 0, "blends": 0, "stars": np.nan}
+    span = int(got[-1]) - int(got[0]) + 1  # frame periods, a lost camera frame's included
+    out = {"seconds": span / fps, "first": span < opts.until_enough + max(1, opts.until_enough // 3),
+           "look": opts.until_enough / fps, "kept": False, "wrong": 0, "blends": 0, "stars": np.nan, "spared": 0}
     try:
         seg = segment(buf[:len(got)], pattern["frames"], layout, 65535.0, opts.segment, times=got / fps)
     except SegmentError:
         return out
     for k in range(1, len(loop)):
-        for i in seg.used[loop[k]["file"]]:
+        for i in seg.used.get(loop[k]["file"], []):
             e, imp = tr[i]
             out["wrong"] += e != k
             out["blends"] += e == k and imp > 0.1
     stars = [len(seg.used[e["file"]]) for e in loop[1:] if e["kind"] == "rotstar"]
-    out.update(kept=min(len(u) for u in seg.used.values()) >= 2, stars=float(np.mean(stars)))
+    out.update(kept=min(len(u) for u in seg.used.values()) >= 2, stars=float(np.mean(stars)), spared=len(seg.missing))
     return out
 
 
-def until_enough_rows(n: int, poses: int) -> None:
+def until_enough_rows(n: int, poses: int, extra: int = 2) -> None:
     """The --until-enough table (module doc) at 25 and 30 fps"""
     layout = make_layout()
     es = [E for E, _ in scenes(poses, 12, layout, 4)]
     print("\n| default sequence, --until-enough | fps | s per pose: mean / median / 95 % / worst | enough after the first "
-          "look | poses kept | other-entry frames accepted | blends accepted | clean camera frames per star frame |")
+          "look | poses kept (of them without a frame they spare) | other-entry frames accepted | blends accepted | "
+          "clean camera frames per star frame |")
     print("|---|---|---|---|---|---|---|---|")
     for fps in (25.0, 30.0):
         t0 = time.time()
-        res = [until_enough(es[s % len(es)], layout, fps, s) for s in range(n)]
+        res = [until_enough(es[s % len(es)], layout, fps, s, extra) for s in range(n)]
         secs = np.array([r["seconds"] for r in res])
         print(f"| short holds | {fps:g} | {secs.mean():.2f} / {np.median(secs):.2f} / {np.percentile(secs, 95):.2f} / "
               f"{secs.max():.2f} | "
-              f"{sum(r['first'] for r in res)}/{n} ({res[0]['look']:.2f} s) | {sum(r['kept'] for r in res)}/{n} | "
+              f"{sum(r['first'] for r in res)}/{n} ({res[0]['look']:.2f} s) | {sum(r['kept'] for r in res)}/{n} "
+              f"({sum(r['kept'] and r['spared'] > 0 for r in res)}) | "
               f"{sum(r['wrong'] for r in res)} | {sum(r['blends'] for r in res)} | "
               f"{np.nanmean([r['stars'] for r in res]):.2f} |", flush=True)
         print(f"  ({time.time() - t0:.0f} s)", file=sys.stderr)
@@ -165,6 +168,8 @@ def main(argv=None) -> int:
     p.add_argument("--n", type=int, default=60, help="recordings per short-hold setting (default 60)")
     p.add_argument("--n-old", type=int, default=8, help="recordings of today's default (default 8)")
     p.add_argument("--n-until", type=int, default=200, help="--until-enough recordings per frame rate (default 200)")
+    p.add_argument("--look-extra", type=int, default=2, help="--n-until: camera frames after one loop in the first "
+                   "look (default 2, as cli.capture.first_look)")
     p.add_argument("--poses", type=int, default=6, help="camera poses the recordings cycle through (default 6)")
     a = p.parse_args(argv)
     short = entry_holds(LOOP)
@@ -183,7 +188,7 @@ def main(argv=None) -> int:
             if a.n:
                 row(name, short, seconds, fps, a.n, poses, Options())
     if a.n_until:
-        until_enough_rows(a.n_until, a.poses)
+        until_enough_rows(a.n_until, a.poses, a.look_extra)
     return 0
 
 

@@ -48,8 +48,10 @@ pass or several), with holds as short as two camera frames:
 5. motion: the image shift between the two halves of the longer runs and
    between visits of the same class far apart, per camera frame; times the
    frames spanned it must stay below max_motion px;
-6. every frame of pattern.json must have a class: a missing one raises
-   SegmentError naming it (and the time its place in the loop went by).
+6. every frame of pattern.json must have a class, but for those a pose can
+   do without (pattern.loop.SPARE_KINDS: one identity frame, the
+   checkerboard; opts.content_spare): a missing one raises SegmentError
+   naming it; the spared ones are listed in Segmentation.missing.
 
 7. blends in some rows: a camera frame that caught a little of the entry
    before or after it in some rows (the panel scanning out, the LCD still
@@ -73,7 +75,7 @@ from rotstar_mrcal.capture.segment_base import (
     LoopVerdict, Options, Segmentation, SegmentError, Stretch, _mean, check_order, threshold,
 )
 from rotstar_mrcal.pattern.layout import Layout
-from rotstar_mrcal.pattern.loop import entry_holds, expected_levels, player_loop
+from rotstar_mrcal.pattern.loop import entry_holds, expected_levels, player_loop, unspared
 
 
 def frame_vectors(frames, full_scale: float, step: int, mask: np.ndarray | None) -> np.ndarray:
@@ -368,7 +370,7 @@ def assign_entries(visits: list[Visit], X: np.ndarray, n_classes: int, t: np.nda
         v.entry = cmap.get(v.cls, -1)
     by_entry = {e: c for c, e in cmap.items()}
     missing = [loop[e]["file"] for e in range(1, len(loop)) if e not in by_entry]
-    if missing:
+    if missing and (not opts.content_spare or unspared(loop[1:], missing)):
         raise SegmentError(f"{len(missing)} frame(s) of pattern.json not seen clean: {', '.join(missing)} (record "
                            f"longer, or hold the player's frames longer)")
     return by_entry, corr
@@ -436,7 +438,7 @@ def content_segmentation(frames, X: np.ndarray, visits: list[Visit], by_entry: d
     blends = rows is not None and opts.content_blend_z > 0
     means = {e: X[[i for v in visits if v.cls == c for i in v.frames]].mean(axis=0)
              for e, c in by_entry.items()} if blends else {}
-    for e in range(1, len(loop)):
+    for e in sorted(set(by_entry) - {0}):  # in the loop's order, the marker left out
         mine = [v for v in visits if v.cls == by_entry[e]]
         f = loop[e]["file"]
         used[f] = sorted(i for v in mine for i in v.frames)
@@ -456,8 +458,9 @@ def content_segmentation(frames, X: np.ndarray, visits: list[Visit], by_entry: d
     # the difference signal and threshold of segment_loops, for plots and rotstar-capture --auto (not for the split)
     dmask = screen_pixels(frames, full_scale, opts.step)
     d, level = difference_signal(frames, full_scale, opts.step, dmask)
+    missing = [loop[e]["file"] for e in range(1, len(loop)) if e not in by_entry]
     return Segmentation(images, ranges, stretches, np.array([v.entry == 0 for v in visits]), [verdict], 0, d, level,
-                        threshold(d, opts.k, opts.ratio), dmask, method="content", used=used)
+                        threshold(d, opts.k, opts.ratio), dmask, method="content", used=used, missing=missing)
 
 
 def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale: float, opts: Options = Options(),

@@ -125,6 +125,7 @@ def write_into(folder: str, seg: Segmentation, full_scale: float, scale: float =
         "recorded_full_scale": full_scale,
         "value_scale": scale,
         "method": seg.method,
+        **({"missing": list(seg.missing)} if seg.missing else {}),
         **({"frames_used": {f: [int(t) for t in u] for f, u in seg.used.items()}} if seg.used else {}),
         **(extra or {}),
     }

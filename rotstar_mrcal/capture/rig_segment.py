@@ -110,8 +110,8 @@ def follow(frames, reference: Segmentation, loop: list[dict], want: np.ndarray, 
     # the start marker's frames (a split by content may not have seen it: then it is left out of the order check)
     marker = reference.stretches[reference.loop.stretches[0]].core if reference.markers.any() else None
     images, ranges, levels, trimmed = {}, {}, [], 0
-    for entry, (file, (a0, b0)) in zip(loop[1:], reference.ranges.items()):
-        assert entry["file"] == file
+    at = {e["file"]: k for k, e in enumerate(loop)}  # the reference may lack a frame the pose can spare
+    for file, (a0, b0) in reference.ranges.items():
         a, b = still_range(d, tau, a0, b0)
         if np.any(~(d[a + 1 : b] < tau)):
             raise SegmentError(f"{name} did not see one still frame where {ref} saw {file} (camera frames "
@@ -123,10 +123,12 @@ def follow(frames, reference: Segmentation, loop: list[dict], want: np.ndarray, 
         trimmed += (a - a0) + (b0 - b)
         images[file], ranges[file] = _mean(frames, a, b), (a, b)
         levels.append(float(np.mean(level[a:b])))
+    seen = [at[f] for f in reference.ranges]
     if marker is None:
-        corr, why = check_order(np.array(levels), want[1:], opts.min_correlation)
+        corr, why = check_order(np.array(levels), want[seen], opts.min_correlation)
     else:
-        corr, why = check_order(np.r_[np.mean(level[marker[0] : marker[1]]), levels], want, opts.min_correlation)
+        corr, why = check_order(np.r_[np.mean(level[marker[0] : marker[1]]), levels], want[[0] + seen],
+                                opts.min_correlation)
     if why:
         raise SegmentError(f"{name}: over the frames {ref} split, {why}")
     notes = [f"{name}: {trimmed} frame(s) at the edges of the ranges left out (a transition seen a frame later)"] \

@@ -39,6 +39,8 @@ class Options:
     marker_hold: int = 0  # content: the start marker's hold (0: as hold says)
     refresh_hz: float = 60.0  # content: the screen's refresh rate (with times in seconds: each entry's time)
     content_timing: float = 1.0  # content: a visit's time may be off by this many (mean of two) entry durations
+    content_spare: bool = True  # content: a pose may lack the frames pattern.loop.SPARE_KINDS allows (one identity
+    #                             frame, the checkerboard); False: every frame of pattern.json or SegmentError
     content_blend_z: float = 6.0  # content: a camera frame blending in the entry before or after by this many sigmas
     #                               in some rows is not averaged (content.blend_free; 0: every clean frame averaged)
 
@@ -81,6 +83,8 @@ class Segmentation:
     mask: np.ndarray | None = None  # the downsampled pixels d and level average over (None: all)
     method: str = "loop"  # how it was split: 'loop' (between start markers) or 'content' (capture.content)
     used: dict[str, list[int]] | None = None  # content: pattern.json file -> every camera frame averaged
+    missing: list[str] = dataclasses.field(default_factory=list)  # content: files not seen clean, which the pose
+    #                                                               can do without (pattern.loop.unspared)
 
     @property
     def loop(self) -> LoopVerdict:
@@ -92,7 +96,8 @@ class Segmentation:
             n = sum(len(u) for u in (self.used or {}).values())
             return (f"{len(self.stretches)} clean visits of displayed frames found by their content; {n} camera "
                     f"frames averaged, >= {lv.min_average} per pattern frame, drift {lv.motion_px:.2f} px, level "
-                    f"correlation {lv.correlation:.3f}")
+                    f"correlation {lv.correlation:.3f}" + (f"; not seen: {', '.join(self.missing)}" if self.missing
+                                                           else ""))
         n_ok = sum(v.ok for v in self.loops)
         return (f"{len(self.stretches)} stretches, {len(self.loops)} loop(s) seen, {n_ok} usable; using the one "
                 f"starting at frame {self.stretches[lv.marker].start}: >= {lv.min_average} frames averaged per "

@@ -221,26 +221,30 @@ def enough(frames, seqnums: np.ndarray, pattern: dict, layout, full_scale: float
 def record_until_enough(src: FrameSource, buf, first_seq: int, pattern: dict, layout, opts: SessionOptions) -> np.ndarray:
     """Record into buf (buf[0] holds the first frame) until enough() or buf is full; the sequence numbers
 
-    The first look is opts.until_enough frames, then a third of that at a
-    time. (While a look is split, a camera's driver may drop frames: they
-    are gaps in the sequence numbers, which segmentation takes as time.)
+    The first look is opts.until_enough frame periods, then a third of that
+    at a time: periods by the sequence numbers, so that a frame the camera
+    lost counts as the time it took (a look ends at the same moment whatever
+    was lost). (While a look is split, a camera's driver may drop frames:
+    they are gaps in the sequence numbers, which segmentation takes as time.)
     """
     seq = [first_seq]
-    want = min(opts.until_enough, len(buf))
+    want = opts.until_enough  # frame periods since the first frame
     while True:
-        n = len(seq)
-        if want > n:
+        ended = False
+        while not ended and len(seq) < len(buf) and seq[-1] - seq[0] + 1 < want:
+            n = len(seq)
+            more = min(max(1, (want - (seq[-1] - seq[0] + 1)) // 2), len(buf) - n)  # halves: a frame lost in a
+            #                                                            chunk does not carry the look past `want`
             try:
-                got = record(src, want - n, out=buf[n:want]).sequence.tolist()
+                got = record(src, more, out=buf[n:n + more]).sequence.tolist()
             except CaptureError:  # the source has nothing left
                 got = []
             seq += got
-            if len(got) < want - n:  # it ended: what there is
-                break
-        if len(seq) >= len(buf) or enough(buf[:len(seq)], np.array(seq), pattern, layout, src.full_scale, opts,
+            ended = len(got) < more
+        if ended or len(seq) >= len(buf) or enough(buf[:len(seq)], np.array(seq), pattern, layout, src.full_scale, opts,
                                           src.fps):
             break
-        want = min(len(buf), len(seq) + max(1, opts.until_enough // 3))
+        want = seq[-1] - seq[0] + 1 + max(1, opts.until_enough // 3)
     return np.array(seq)
 
 
@@ -295,6 +299,9 @@ def process_segmented(ds: OutputDataset, pose: str, pattern: dict, layout, seg, 
                  display_offsets=None if display.offsets is None else display.offsets.tolist(),
                  display_maps=display.as_dict())
     state = board_state(r.corners)
+    if seg.missing:
+        messages.append(f"{ds.what(pose)}: written without {', '.join(seg.missing)} (not seen clean; rotstar's "
+                        f"detection does without it: pattern.loop.SPARE_KINDS)")
     messages += [f"{ds.what(pose)}: board {state} ({r.n_valid}/{total}), frames agree to {motion:.3f} px beyond "
                  f"the display's maps; {coverage.describe(counts)}", display.summary()]
     return PoseOutcome(True, messages, folder)

@@ -11,6 +11,7 @@ difference at any pixel from the clean entry, in units of the screen's white).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 
@@ -108,15 +109,39 @@ def test_pwm_brightness_and_several_loops(E):
     assert min(len(u) for u in seg.used.values()) >= 4  # two or three passes of every frame
 
 
-def test_a_missing_frame_is_named(E):
-    """The camera lost every frame that saw identity_03 (a gap in its sequence numbers): refused, naming it"""
-    k = next(i for i, e in enumerate(LOOP) if e["file"] == "identity_03.png")
+def lose(E, files: list[str]):
+    """A recording from which the camera lost every frame that saw these files (gaps in its sequence numbers)"""
+    ks = {i for i, e in enumerate(LOOP) if e["file"] in files}
     _, _, tr = record(E, start_entry=3)
-    lost = [i for i, (e, _) in enumerate(tr) if e == k]
+    lost = [i for i, (e, _) in enumerate(tr) if e in ks]
     frames, seq, _ = record(E, start_entry=3, drop_frames=lost)
     assert len(frames) == len(tr) - len(lost)
-    with pytest.raises(SegmentError, match=r"1 frame\(s\) of pattern.json not seen clean: identity_03\.png"):
+    return frames, seq
+
+
+def test_a_missing_frame_is_named(E):
+    """The camera lost every frame that saw identity_03 and identity_05: more than the pose can spare, refused
+    naming both; a rotating-star frame lost alone is refused too"""
+    frames, seq = lose(E, ["identity_03.png", "identity_05.png"])
+    with pytest.raises(SegmentError, match=r"2 frame\(s\) of pattern.json not seen clean: identity_03\.png, "
+                                           r"identity_05\.png"):
         segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, OPTS, times=seq / FPS)
+    frames, seq = lose(E, ["rotstar_04.png"])
+    with pytest.raises(SegmentError, match=r"1 frame\(s\) of pattern.json not seen clean: rotstar_04\.png"):
+        segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, OPTS, times=seq / FPS)
+
+
+def test_one_identity_frame_and_the_checkerboard_are_spared(E):
+    """One identity frame and the checkerboard lost: the pose is split without them (pattern.loop.SPARE_KINDS),
+    every other frame clean and in its place; with content_spare=False it is refused, naming them"""
+    frames, seq = lose(E, ["identity_03.png", "checkerboard.png"])
+    seg = segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, OPTS, times=seq / FPS)
+    assert seg.missing == ["identity_03.png", "checkerboard.png"]
+    assert set(seg.images) == {f["file"] for f in LAYOUT.frames()} - set(seg.missing)
+    assert "not seen: identity_03.png, checkerboard.png" in seg.summary()
+    strict = dataclasses.replace(OPTS, content_spare=False)
+    with pytest.raises(SegmentError, match=r"2 frame\(s\) .*: identity_03\.png, checkerboard\.png"):
+        segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, strict, times=seq / FPS)
 
 
 def test_another_pattern_is_refused(E):

@@ -40,7 +40,7 @@ from rotstar_mrcal.capture.simulated import (
 )
 from rotstar_mrcal.capture.backend_replay import ReplaySource
 from rotstar_mrcal.pattern.layout import make_layout
-from rotstar_mrcal.pattern.loop import entry_holds, player_loop
+from rotstar_mrcal.pattern.loop import entry_holds, player_loop, unspared
 
 LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)
 LOOP = player_loop(LAYOUT.frames())
@@ -78,10 +78,11 @@ def one(E, s: int, opts: Options = Options(method="content")):
         named = set(re.findall(r"\w+_\d+\.png|checkerboard\.png", str(e)))
         assert named and named <= missing, (s, str(e), missing)
         return False, missing, 0, 0, 0.0
+    assert not unspared(LAYOUT.frames(), seg.missing) and set(seg.missing) <= missing, (s, seg.missing, missing)
     wrong = blends = 0
     worst = 0.0
     for k in range(1, N):
-        for i in seg.used[LOOP[k]["file"]]:
+        for i in seg.used.get(LOOP[k]["file"], []):
             e, imp = truth[i]
             wrong += e != k
             blends += e == k and imp > BLEND
@@ -90,18 +91,20 @@ def one(E, s: int, opts: Options = Options(method="content")):
 
 
 def many(Es, n):
-    kept = refused = 0
+    """(kept, refused, kept without a frame the pose can spare) of n recordings"""
+    kept = refused = spared = 0
     for s in range(n):
         ok, missing, wrong, blends, worst = one(Es[s % len(Es)], s)
         assert wrong == 0 and blends == 0, (s, wrong, blends, worst)
-        assert ok or missing, s  # every frame seen: kept
+        assert ok or unspared(LAYOUT.frames(), sorted(missing)), s  # every frame it needs seen: kept
         kept += ok
         refused += not ok
-    return kept, refused
+        spared += ok and bool(missing)
+    return kept, refused, spared
 
 
 def test_flawed_recordings_few():
-    kept, refused = many(scenes(1), 12)
+    kept, refused, spared = many(scenes(1), 12)
     assert kept >= 8
 
 
@@ -117,8 +120,9 @@ def test_blended_rows_left_out():
 @pytest.mark.slow
 def test_flawed_recordings_200():
     """The issue's count: 200 recordings, 0 blended or misidentified camera frames accepted"""
-    kept, refused = many(scenes(4), 200)
-    assert kept >= 140 and refused >= 1  # (a pose missing a frame occurs, and is named)
+    kept, refused, spared = many(scenes(4), 200)
+    assert kept >= 180 and spared >= 1 and refused >= 1  # (poses lacking a frame they can spare, or one they
+    #                                                          cannot, occur: kept, or refused naming it)
 
 
 def test_the_flaws_each():
