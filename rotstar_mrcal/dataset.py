@@ -63,6 +63,7 @@ class Pose:
     identity: np.ndarray | None = None  # (nidentity, H, W) float32, the identity frames, or None
     phase: np.ndarray | None = None  # (2, 4, H, W) float32: the phase shifts along x, then y, steps 0..3; or None
     star: np.ndarray | None = None  # (H, W) float32, the star frame, or None
+    missing: tuple[str, ...] = ()  # the identity frame not recorded (its file name; all NaN in identity), or ()
 
     @property
     def first_file(self) -> str:
@@ -257,8 +258,45 @@ def read_image(fn: str) -> tuple[np.ndarray, float]:
     raise DatasetError(f"{fn}: pixel type {img.dtype}; expected 8- or 16-bit grayscale")
 
 
+MAX_MISSING_IDENTITY = 1
+OPTIONAL_KINDS = ("checkerboard", "star")  # frames a pose may lack (load_pose gives None)
+"""Identity frames a pose may lack: IdentityCode.decode reads every element from the others (one erasure;
+a short capture may miss one identity frame's display). The rotating-star frames are all needed."""
+
+
+def identity_stack(images, files: list[str], shape: tuple[int, int] | None = None) -> tuple[np.ndarray, tuple[str, ...]]:
+    """((len(files), H, W) float32 of images[f] for f in files, all NaN where images lacks f; the f it lacks)
+
+    images: {file name: (H, W) image}, e.g. a pose folder's frames or a
+    capture's segmented averages; shape: (H, W) when images may hold none
+    of files. How a pose lacking an identity frame reaches the detector
+    (detect.identity reads the code from the other frames).
+
+    >>> img = np.ones((2, 3))
+    >>> stack, missing = identity_stack({"identity_00.png": img, "identity_02.png": 2 * img},
+    ...                                 ["identity_00.png", "identity_01.png", "identity_02.png"])
+    >>> stack.shape, stack.dtype, stack[:, 0, 0].tolist(), missing
+    ((3, 2, 3), dtype('float32'), [1.0, nan, 2.0], ('identity_01.png',))
+    """
+    have = [images[f] for f in files if f in images]
+    if shape is None:
+        if not have:
+            raise ValueError(f"none of {len(files)} identity frames and no frame size")
+        shape = np.shape(have[0])
+    stack = np.full((len(files), *shape), np.nan, np.float32)
+    for k, f in enumerate(files):
+        if f in images:
+            stack[k] = images[f]
+    return stack, tuple(f for f in files if f not in images)
+
+
 def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
-    """Read one pose's frames; DatasetError on missing, unreadable or mismatched files"""
+    """Read one pose's frames; DatasetError on missing, unreadable or mismatched files
+
+    A pose lacking one identity frame (MAX_MISSING_IDENTITY) is read: that
+    frame all NaN in Pose.identity, its name in Pose.missing. Lacking more,
+    or any rotating-star frame: DatasetError naming the first one missing.
+    """
     frames = layout_or_frames.frames() if isinstance(layout_or_frames, Layout) else layout_or_frames
     folder = os.path.join(seq, pose)
     expected = {f["file"] for f in frames}
@@ -268,9 +306,11 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         raise DatasetError(f"{os.path.join(folder, extra[0])}: extra frame not in pattern.json")
     rot_files = [os.path.join(folder, f["file"]) for f in frames if f["kind"] == "rotstar"]
     id_files = [os.path.join(folder, f["file"]) for f in frames if f["kind"] == "identity"]
-    check_sizes(rot_files + id_files)
+    lacking = [fn for fn in id_files if not os.path.exists(fn)]
+    read = [fn for fn in id_files if len(lacking) > MAX_MISSING_IDENTITY or fn not in lacking]
+    check_sizes(rot_files + read)
     imgs, scales = [], set()
-    for fn in rot_files + id_files:
+    for fn in rot_files + read:  # a missing frame beyond what may be: "<file>: missing frame"
         img, fs = read_image(fn)
         imgs.append(img)
         scales.add(fs)
@@ -279,7 +319,7 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         common = max(set(shapes), key=shapes.count)  # the size most frames have
         odd = next(k for k, s in enumerate(shapes) if s != common)
         raise DatasetError(
-            f"{(rot_files + id_files)[odd]}: frame size {shapes[odd][1]}x{shapes[odd][0]} differs from the others "
+            f"{(rot_files + read)[odd]}: frame size {shapes[odd][1]}x{shapes[odd][0]} differs from the others "
             f"({common[1]}x{common[0]})"
         )
     if len(scales) > 1:
@@ -299,6 +339,7 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
             stack.append(img)
         phase = np.stack(stack).reshape(2, len(stack) // 2, *imgs[0].shape)
     n = len(rot_files)
+    identity, missing = identity_stack(dict(zip(read, imgs[n:])), id_files, imgs[0].shape)
     return Pose(
         name=pose,
         folder=folder,
@@ -306,9 +347,10 @@ def load_pose(seq: str, pose: str, layout_or_frames) -> Pose:
         checkerboard=checker,
         full_scale=scales.pop(),
         files=rot_files,
-        identity=np.stack(imgs[n:]) if id_files else None,
+        identity=identity if id_files else None,
         phase=phase,
         star=star,
+        missing=tuple(os.path.basename(fn) for fn in missing),
     )
 
 
@@ -470,6 +512,22 @@ def image_size(fn: str) -> tuple[int, int] | None:
     return None if img is None else (img.shape[1], img.shape[0])
 
 
+def as_read(files: set[str], frames: list[dict]) -> set[str]:
+    """The file names of a pose folder, with those load_pose does without added: the checkerboard and star frames
+    (OPTIONAL_KINDS), one identity frame (MAX_MISSING_IDENTITY)
+
+    >>> frames = [{"file": "rotstar_00.png", "kind": "rotstar"}, {"file": "checkerboard.png", "kind": "checkerboard"}
+    ...           ] + [{"file": f"identity_{k:02d}.png", "kind": "identity"} for k in range(3)]
+    >>> sorted(as_read({"rotstar_00.png", "identity_00.png", "identity_02.png"}, frames))
+    ['checkerboard.png', 'identity_00.png', 'identity_01.png', 'identity_02.png', 'rotstar_00.png']
+    >>> sorted(as_read({"rotstar_00.png", "identity_00.png"}, frames))
+    ['checkerboard.png', 'identity_00.png', 'rotstar_00.png']
+    """
+    ident = {f["file"] for f in frames if f["kind"] == "identity"}
+    optional = {f["file"] for f in frames if f["kind"] in OPTIONAL_KINDS}
+    return files | optional | (ident if len(ident - files) <= MAX_MISSING_IDENTITY else set())
+
+
 def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
     """Read the layout of a multi-camera dataset; DatasetError (one line, naming the files) when it is inconsistent
 
@@ -493,7 +551,8 @@ def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
     exactly as a one-camera pose folder (load_pose). A camera folder missing
     in a pose is that camera not seeing the board there, not an error. Errors:
     a pose folder not named poseNNN or holding no camera folder, the camera
-    folders of one pose holding different frames (differing frame counts),
+    folders of one pose holding different frames (differing frame counts;
+    a camera lacking what load_pose does without, as_read, is no difference),
     a camera folder whose number has leading zeros (camera-01: mrcal's
     file names and every tool name it camera-1),
     one camera's images differing in size between poses, a camera with no
@@ -540,7 +599,8 @@ def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:
         raise DatasetError(f"{seq}: pose folders {dup[0]} and {dup[1]} have the same number; mrcal would take them "
                            "for one instant")
     cameras = list(range(max(k for h in held.values() for k in h) + 1))
-    for p, h in held.items():  # the cameras of one pose hold the same frames
+    for p, h in held.items():  # the cameras of one pose hold the same frames (or lack only what load_pose may)
+        h = {k: as_read(files, frames) for k, files in h.items()}
         ks = sorted(h)
         for k in ks[1:]:
             if h[k] != h[ks[0]]:

@@ -139,11 +139,14 @@ def quick_check(seg: Segmentation, layout: Layout, pattern: dict, full_scale: fl
 
     full_scale: of the averages as they are, in recorded units (before
     encode_average's scaling): the recording's full scale / value_scale.
+    An identity frame seg.images lacks is read as not recorded
+    (dataset.identity_stack), as rotstar-detect reads the pose folder.
     """
-    def stack(kind):
-        files = [f["file"] for f in pattern["frames"] if f["kind"] == kind]
-        return np.stack([seg.images[f] for f in files]).astype(np.float32) if files else None
+    def files(kind):
+        return [f["file"] for f in pattern["frames"] if f["kind"] == kind]
 
-    cb = stack("checkerboard")
-    return detect_pose(stack("rotstar"), layout, full_scale=full_scale, checkerboard=None if cb is None else cb[0],
-                       identity=stack("identity"))
+    rot = np.stack([seg.images[f] for f in files("rotstar")]).astype(np.float32)
+    cb = [seg.images[f] for f in files("checkerboard") if f in seg.images]
+    ident = dataset.identity_stack(seg.images, files("identity"), rot.shape[1:])[0] if files("identity") else None
+    return detect_pose(rot, layout, full_scale=full_scale, checkerboard=np.asarray(cb[0], np.float32) if cb else None,
+                       identity=ident)

@@ -29,7 +29,9 @@ stderr.
 Dataset layout: SEQ/pattern.json (as written by rotstar-pattern) and one
 folder per pose, SEQ/<pose>/<file> for every frame in pattern.json (8- or
 16-bit grayscale PNG). Poses are processed in sorted order; the filename
-column of the output is SEQ/<pose>/<first rotating-star frame>.
+column of the output is SEQ/<pose>/<first rotating-star frame>. A pose may
+lack one identity frame (a short capture that missed it): the elements are
+named from the other identity frames, and a line on stderr says so.
 
 Several cameras (SEQ/poseNNN/camera-K/<file>, doc/dataset.md): every
 camera's poses are detected and written into the one corners.vnl (filename
@@ -183,7 +185,9 @@ def say_before(a, ds: dataset.Dataset, progress: Progress) -> None:
 
 
 def progress_line(a, layout, progress: Progress, r) -> None:
-    """One pose done: its corners and why some are missing, or why it was skipped"""
+    """One pose done: its corners and why some are missing, or why it was skipped (after a note on its frames)"""
+    if r.note:
+        say(f"rotstar-detect: {r.pose}: {r.note}")
     if not r.found:
         progress.step(r.pose, f"skipped: {r.error}", important=True)
         return

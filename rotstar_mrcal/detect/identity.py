@@ -30,6 +30,10 @@ with a reason. Labels never come from the elements' arrangement here; that
 is checked afterwards (consistency.py). When most codes do not read because
 one identity frame is inverted or two are swapped, `misordered` says which
 (IdentityCode.misordered), and the pose is refused with that reason.
+
+An identity frame that was not recorded is all NaN (dataset.identity_stack):
+the map is that of the other frames, its level in every element NaN, and
+the code reads each element from the other frames (IdentityCode.decode).
 """
 
 from __future__ import annotations
@@ -75,8 +79,23 @@ class Identities:
         return Identities([c for c, k in zip(self.contours, keep) if k] + other.contours, **arrays)
 
 
+def absent_frames(identity: np.ndarray) -> np.ndarray:
+    """(nidentity,) bool: the identity frames that were not recorded (all NaN; dataset.identity_stack)
+
+    >>> absent_frames(np.array([[[1.0, 2.0]], [[np.nan, np.nan]], [[np.nan, 0.0]]])).tolist()
+    [False, True, False]
+    """
+    return np.array([bool(np.isnan(f.flat[0]) and np.isnan(f).all()) for f in identity], bool)
+
+
 def identity_map(rotstar: np.ndarray, identity: np.ndarray) -> np.ndarray:
-    """(H, W) float32 in [0, 1]: contrast over the identity frames / brightness; see the module doc"""
+    """(H, W) float32 in [0, 1]: contrast over the identity frames / brightness; see the module doc
+
+    A frame that was not recorded (all NaN) is left out: the map of the others.
+    """
+    identity = [f for f, m in zip(identity, absent_frames(identity)) if not m]
+    if not identity:
+        return np.zeros(np.shape(rotstar)[1:], np.float32)
     hi = np.asarray(identity[0], np.float32).copy()
     lo = hi.copy()
     for f in identity[1:]:
@@ -102,7 +121,10 @@ def element_regions(mask: np.ndarray, min_area: float = MIN_AREA):
 
 
 def element_levels(identity: np.ndarray, centres: np.ndarray, halfsides: np.ndarray) -> np.ndarray:
-    """(N, nidentity) mean of each identity frame over a SAMPLES x SAMPLES lattice in each element's square"""
+    """(N, nidentity) mean of each identity frame over a SAMPLES x SAMPLES lattice in each element's square
+
+    NaN in the column of a frame that was not recorded (IdentityCode.decode reads one such).
+    """
     t = np.linspace(-0.6, 0.6, SAMPLES)
     oy, ox = np.meshgrid(t, t, indexing="ij")
     x = np.rint(centres[:, 0, None] + halfsides[:, None] * ox.ravel()).astype(int)
@@ -123,7 +145,7 @@ def _read(mask, identity, code, noise) -> Identities:
     return Identities(cs, centroids, edge, inscribed, index, reason)
 
 
-def undo_inversion(identity: np.ndarray, k: int) -> np.ndarray:
+def undo_inversion(identity: np.ndarray, k: int, missing: np.ndarray | None = None) -> np.ndarray:
     """The identity frames with frame k inverted back within the other frames' range, pixel by pixel
 
     An inverted image (full scale - value) makes the screen's surround and
@@ -136,8 +158,12 @@ def undo_inversion(identity: np.ndarray, k: int) -> np.ndarray:
     >>> inv = f.copy(); inv[0] = 255 - f[0]                             # frame 0 written inverted
     >>> undo_inversion(inv, 0)[:, 0].tolist()
     [[10.0, 10.0], [10.0, 200.0], [200.0, 10.0]]
+
+    missing: (nidentity,) bool, the frames not recorded (absent_frames), left out of the range.
     """
-    others = np.delete(identity, k, axis=0)
+    keep = np.ones(len(identity), bool) if missing is None else ~np.asarray(missing, bool)
+    keep[k] = False
+    others = identity[keep]
     lo, hi = others.min(axis=0), others.max(axis=0)
     out = identity.copy()
     out[k] = np.clip(lo + hi - identity[k], lo, hi)
@@ -149,13 +175,15 @@ def inverted_frame(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCode
 
     Tried when the frames as recorded read fewer than 4 elements (no board):
     fixed of the n elements then found read, at least MISORDER_READ of them.
+    A frame that was not recorded (absent_frames) is neither tried nor used.
     """
-    for k in range(len(identity)):
-        fixed = undo_inversion(identity, k)
+    missing = absent_frames(identity)
+    for k in np.flatnonzero(~missing):
+        fixed = undo_inversion(identity, k, missing)
         ids = _read((identity_map(rotstar, fixed) > MAP_THRESHOLD).astype(np.uint8), fixed, code, noise)
         n, ok = len(ids.index), int(np.sum(ids.index >= 0))
         if ok >= 4 and ok >= MISORDER_READ * n:
-            return ("inverted", k, read, ok, n)
+            return ("inverted", int(k), read, ok, n)
     return ()
 
 
@@ -165,7 +193,8 @@ def read_identities(rotstar: np.ndarray, identity: np.ndarray, code: IdentityCod
     if len(identity) != code.nframes:
         raise ValueError(f"{len(identity)} identity frames; the code has {code.nframes}")
     imap = identity_map(rotstar, identity)
-    noise = pixel_noise(identity) / SAMPLES  # of the mean of SAMPLES^2 pixels
+    present = identity[np.flatnonzero(~absent_frames(identity))[:2]]  # pixel_noise reads two frames
+    noise = pixel_noise(present) / SAMPLES if len(present) else 0.0  # of the mean of SAMPLES^2 pixels
     ids = _read((imap > MAP_THRESHOLD).astype(np.uint8), identity, code, noise)
     if len(ids.index):  # most codes unread: a frame inverted, or two swapped?
         levels = element_levels(identity, ids.centroids, np.maximum(ids.inscribed, 0.5))

@@ -87,6 +87,7 @@ class PoseResult:
     corners: PoseCorners | None
     error: str = ""  # '' or the one-line reason the pose gave no board
     size: tuple[int, int] | None = None  # (width, height) of its frames
+    note: str = ""  # '' or what was read differently (an identity frame missing: missing_note)
 
     @property
     def found(self) -> bool:
@@ -137,7 +138,20 @@ def detect_one(seq: str, pose: str, pattern_frames: list[dict], layout: Layout, 
                     identity=p.identity, **opts)
     if name != "rotstar" and r.found:
         r = started_from_rotstar(name, r, p, layout)
-    return PoseResult(pose, p.first_file, r, r.error, (p.rotstar.shape[2], p.rotstar.shape[1]))
+    return PoseResult(pose, p.first_file, r, r.error, (p.rotstar.shape[2], p.rotstar.shape[1]), missing_note(p))
+
+
+def missing_note(p: Pose) -> str:
+    """'' or what a pose lacking an identity frame (Pose.missing) was read from
+
+    >>> import numpy as np
+    >>> p = Pose("pose007", "seq/pose007", None, None, 65535.0, [], np.zeros((13, 1, 1)), missing=("identity_06.png",))
+    >>> missing_note(p)
+    'identity_06.png missing: read from the other 12 identity frames'
+    """
+    if not p.missing:
+        return ""
+    return f"{', '.join(p.missing)} missing: read from the other {len(p.identity) - len(p.missing)} identity frames"
 
 
 def started_from_rotstar(name: str, r: PoseCorners, p: Pose, layout: Layout) -> PoseCorners:

@@ -35,6 +35,13 @@ code). Nothing is corrected: a calibration loses an element rather than
 gaining a wrong label. When most elements do not read, `misordered` names
 the one simple fault that explains it (a frame inverted, two frames swapped)
 so that the pose is refused with what was seen.
+
+One identity frame missing from a recording (its levels NaN) is still read:
+the other n - 1 frames hold w ones (the missing bit is 0) or w - 1 (it is
+1), and the same gap rule picks which (rejected when both or neither
+pass). With d = 4 the word so completed plus one misread bit is never a
+codeword (tests/pattern/test_identity.py checks every case), so a missing
+frame costs no label safety; two missing frames are not read.
 """
 
 from __future__ import annotations
@@ -65,6 +72,11 @@ def _codewords(n: int, w: int) -> np.ndarray:
 def _spread(n: int, w: int, count: int) -> np.ndarray:
     all_words = _codewords(n, w)
     return all_words[np.round(np.linspace(0, len(all_words) - 1, count)).astype(int)]
+
+
+def _split(s: np.ndarray, k: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(hi, lo, gap) of descending levels s[:, :m] read as k ones and m - k zeros: the medians and the gap between"""
+    return np.median(s[:, :k], axis=1), np.median(s[:, k:m], axis=1), s[:, k - 1] - s[:, k]
 
 
 def code_size(n: int, w: int) -> int:
@@ -122,13 +134,37 @@ class IdentityCode:
         """(index (...,), reason (...,)): the element indices read from levels (..., nframes), -1 and why where not
 
         levels: each element's mean intensity in each identity frame, in any
-        units; noise: the standard deviation of one such mean (0: not checked).
+        units, NaN in the column of an identity frame that was not recorded;
+        noise: the standard deviation of one such mean (0: not checked).
+        One missing frame per element is read from the other 12 (the module
+        doc); two or more are not.
+
+        >>> code = IdentityCode.for_grid(nx=14, ny=9)
+        >>> levels = 20 + 180 * code.encode([3, 77]).astype(float)
+        >>> levels[:, 6] = np.nan                              # identity_06.png not recorded
+        >>> code.decode(levels, noise=2.0)[0].tolist()
+        [3, 77]
+        >>> levels[1, 2] = np.nan
+        >>> code.decode(levels, noise=2.0)[1].tolist()
+        ['', 'identity unreadable: 2 identity frames missing']
         """
         v = np.asarray(levels, float)
         if v.shape[-1] != self.nframes:
             raise ValueError(f"levels of {self.nframes} identity frames expected, not {v.shape[-1]}")
         shape = v.shape[:-1]
         v = v.reshape(-1, self.nframes)
+        missing = np.isnan(v).sum(axis=1)
+        index = np.full(len(v), -1, np.int64)
+        reason = np.full(len(v), "", dtype=object)
+        whole, one = missing == 0, missing == 1
+        index[whole], reason[whole] = self._decode_whole(v[whole], noise)
+        index[one], reason[one] = self._decode_erased(v[one], noise)
+        many = missing >= 2
+        reason[many] = [f"identity unreadable: {m} identity frames missing" for m in missing[many]]
+        return index.reshape(shape), reason.reshape(shape)
+
+    def _decode_whole(self, v: np.ndarray, noise: float) -> tuple[np.ndarray, np.ndarray]:
+        """decode of (N, nframes) levels, every frame recorded: the w brightest are the ones"""
         w = self.weight
         s = -np.sort(-v, axis=1)  # descending
         hi = np.median(s[:, :w], axis=1)
@@ -136,8 +172,7 @@ class IdentityCode:
         contrast = hi - lo
         gap = s[:, w - 1] - s[:, w]
         bits = (v >= s[:, w - 1 : w]).astype(np.uint8)
-        table = self._table()
-        index = np.array([table.get(b.tobytes(), -1) for b in bits], np.int64)
+        index = self._lookup(bits)
         reason = np.full(len(v), "", dtype=object)
         white = np.sum(v - lo[:, None] > 0.5 * contrast[:, None], axis=1)
         readable = gap >= MIN_GAP_FRACTION * contrast
@@ -145,10 +180,50 @@ class IdentityCode:
         bad_count = ~readable
         reason[bad_count] = [f"identity unreadable: {n} white frames, the code has {w} "
                              "(a frame dropped, repeated or misread)" for n in white[bad_count]]
+        return self._dim(index, reason, contrast, noise)
+
+    def _decode_erased(self, v: np.ndarray, noise: float) -> tuple[np.ndarray, np.ndarray]:
+        """decode of (N, nframes) levels with one NaN per row: the erased bit from the other frames' count
+
+        The n - 1 known levels hold w ones (the erased bit is 0) or w - 1 (it
+        is 1): the split whose gap passes MIN_GAP_FRACTION of its contrast
+        names it, unless both pass (read as neither).
+        """
+        n, w = self.nframes, self.weight
+        s = -np.sort(-v, axis=1)  # descending, the NaN last
+        splits = [_split(s, k, n - 1) for k in (w, w - 1)]
+        passes = [gap >= MIN_GAP_FRACTION * (hi - lo) for hi, lo, gap in splits]
+        one = passes[1] & ~passes[0]  # the w - 1 split alone passes: the erased bit is 1
+        hi, lo, gap = (np.where(one, b, a) for a, b in zip(*splits))
+        contrast = hi - lo
+        k = np.where(one, w - 1, w)
+        erased = np.isnan(v)
+        with np.errstate(invalid="ignore"):
+            bits = (v >= s[np.arange(len(v)), k - 1][:, None]).astype(np.uint8)
+            white = np.sum(v - lo[:, None] > 0.5 * contrast[:, None], axis=1)
+        bits[erased] = one
+        index = self._lookup(bits)
+        reason = np.full(len(v), "", dtype=object)
+        reason[index < 0] = "identity not a codeword (misread bits)"
+        both = passes[0] & passes[1]
+        reason[both] = (f"identity unreadable: the {n - 1} frames read fit {w} and {w - 1} white frames alike "
+                        "(one identity frame missing)")
+        neither = ~passes[0] & ~passes[1]
+        reason[neither] = [f"identity unreadable: {c} white frames of the {n - 1} read (one missing), the code has "
+                           f"{w} (a frame dropped, repeated or misread)" for c in white[neither]]
+        return self._dim(index, reason, contrast, noise)
+
+    def _lookup(self, bits: np.ndarray) -> np.ndarray:
+        table = self._table()
+        return np.array([table.get(b.tobytes(), -1) for b in bits], np.int64)
+
+    @staticmethod
+    def _dim(index, reason, contrast, noise) -> tuple[np.ndarray, np.ndarray]:
+        """(index, reason) with the elements whose contrast does not beat the noise rejected, and -1 where rejected"""
         dim = ~(contrast > max(MIN_CONTRAST_NOISE * noise, 0.0)) | ~np.isfinite(contrast)
         reason[dim] = "identity unreadable: no contrast between the identity frames"
         index[reason != ""] = -1
-        return index.reshape(shape), reason.reshape(shape)
+        return index, reason
 
     def misordered(self, levels, noise: float = 0.0) -> tuple:
         """() or what happened to the identity frames, when one simple fault explains why most codes do not read
@@ -172,8 +247,12 @@ class IdentityCode:
         >>> inv = levels.copy(); inv[:, 5] = 220 - inv[:, 5]
         >>> code.misordered(inv)
         ('inverted', 5, 0, 126, 126)
+        >>> levels[:, 4] = np.nan; code.misordered(levels)     # a frame not recorded: no fault named
+        ()
         """
         v = np.asarray(levels, float).reshape(-1, self.nframes)
+        if np.isnan(v).any():  # a frame missing: undoing a fault would need its level
+            return ()
         index, reason = self.decode(v, noise)
         n = int(np.sum(reason != "identity unreadable: no contrast between the identity frames"))
         read = int(np.sum(index >= 0))

@@ -208,13 +208,14 @@ def test_layout_read(tmp_path):
 
 
 def test_different_frame_counts(tmp_path):
+    """(one identity frame missing is no difference: load_pose reads the pose; tests/test_dataset.py)"""
     seq = tiny_rig(tmp_path)
-    os.remove(os.path.join(seq, "pose001", "camera-1", "identity_03.png"))
+    os.remove(os.path.join(seq, "pose001", "camera-1", "rotstar_03.png"))
     with pytest.raises(dataset.DatasetError) as e:
         dataset.read_rig(seq)
     msg = str(e.value)
     assert "\n" not in msg
-    assert msg.startswith(os.path.join(seq, "pose001", "camera-1", "identity_03.png") + ": missing, though ")
+    assert msg.startswith(os.path.join(seq, "pose001", "camera-1", "rotstar_03.png") + ": missing, though ")
     assert "the cameras of a pose must hold the same frames" in msg
 
 
