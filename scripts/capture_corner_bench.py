@@ -80,7 +80,7 @@ def one_recording(E, hold, flaws: Flaws, rng, blend_z: float = Options.content_b
     buf = np.empty((nframes,) + first.image.shape, first.image.dtype)
     buf[0] = first.image
     if opts.until_enough:
-        seqnums = record_until_enough(src, buf, first.sequence, PATTERN, LAYOUT, opts)
+        seqnums, _ = record_until_enough(src, buf, first.sequence, PATTERN, LAYOUT, opts)
     else:
         seqnums = np.r_[first.sequence, record(src, nframes - 1, out=buf[1:]).sequence]
     try:

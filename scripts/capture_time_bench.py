@@ -124,7 +124,7 @@ def until_enough(E, layout, fps: float, s: int, extra: int = 2) -> dict:
     first = src.read()
     buf = np.empty((nframes,) + first.image.shape, first.image.dtype)
     buf[0] = first.image
-    got = record_until_enough(src, buf, first.sequence, pattern, layout, opts)
+    got, _ = record_until_enough(src, buf, first.sequence, pattern, layout, opts)
     span = int(got[-1]) - int(got[0]) + 1  # frame periods, a lost camera frame's included
     out = {"seconds": span / fps, "first": span < opts.until_enough + max(1, opts.until_enough // 3),
            "look": opts.until_enough / fps, "kept": False, "wrong": 0, "blends": 0, "stars": np.nan, "spared": 0}

@@ -181,17 +181,18 @@ def capture_one(src: FrameSource, ds: OutputDataset, pose: str, pattern: dict, l
     try:
         buf[0] = first.image
         if opts.until_enough:
-            seqnums = record_until_enough(src, buf, first.sequence, pattern, layout, opts)
+            seqnums, ended = record_until_enough(src, buf, first.sequence, pattern, layout, opts)
         else:
             rec = record(src, nframes - 1, out=buf[1:]) if nframes > 1 else None
             seqnums = np.r_[first.sequence, rec.sequence] if rec else np.array([first.sequence])
+            ended = len(seqnums) < nframes
         n = len(seqnums)
         if opts.keep_raw:
             buf.flush()
             with atomic_write(os.path.join(raw_dir, tag + ".json")) as f:
                 json.dump({"sequence": [int(v) for v in seqnums], "fps": src.fps, "exposure_us": ds.exposure,
                            "frames": n}, f)
-        short = [f"{ds.what(pose)}: the source ended after {n} of {nframes} frames"] if n < nframes else []
+        short = [f"{ds.what(pose)}: the source ended after {n} of {nframes} frames"] if ended else []
         out = process_recording(ds, pose, pattern, layout, buf[:n], seqnums, src.full_scale, opts, src.fps)
         out.messages[:0] = short
         if src.fps:  # the time the camera and the screen stood still for this recording
@@ -218,8 +219,10 @@ def enough(frames, seqnums: np.ndarray, pattern: dict, layout, full_scale: float
     return min(counts) >= opts.segment.min_average
 
 
-def record_until_enough(src: FrameSource, buf, first_seq: int, pattern: dict, layout, opts: SessionOptions) -> np.ndarray:
-    """Record into buf (buf[0] holds the first frame) until enough() or buf is full; the sequence numbers
+def record_until_enough(src: FrameSource, buf, first_seq: int, pattern: dict, layout,
+                        opts: SessionOptions) -> tuple[np.ndarray, bool]:
+    """Record into buf (buf[0] holds the first frame) until enough() or buf is full: (the sequence numbers,
+    whether the source ended first)
 
     The first look is opts.until_enough frame periods, then a third of that
     at a time: periods by the sequence numbers, so that a frame the camera
@@ -245,7 +248,7 @@ def record_until_enough(src: FrameSource, buf, first_seq: int, pattern: dict, la
                                           src.fps):
             break
         want = seq[-1] - seq[0] + 1 + max(1, opts.until_enough // 3)
-    return np.array(seq)
+    return np.array(seq), ended
 
 
 def process_recording(ds: OutputDataset, pose: str, pattern: dict, layout, frames: np.ndarray, seqnums: np.ndarray,
@@ -300,8 +303,8 @@ def process_segmented(ds: OutputDataset, pose: str, pattern: dict, layout, seg, 
                  display_maps=display.as_dict())
     state = board_state(r.corners)
     if seg.missing:
-        messages.append(f"{ds.what(pose)}: written without {', '.join(seg.missing)} (not seen clean; rotstar's "
-                        f"detection does without it: pattern.loop.SPARE_KINDS)")
+        messages.append(f"{ds.what(pose)}: written without {', '.join(seg.missing)} (not seen clean; rotstar-detect "
+                        f"does without it)")
     messages += [f"{ds.what(pose)}: board {state} ({r.n_valid}/{total}), frames agree to {motion:.3f} px beyond "
                  f"the display's maps; {coverage.describe(counts)}", display.summary()]
     return PoseOutcome(True, messages, folder)

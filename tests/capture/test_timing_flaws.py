@@ -39,8 +39,8 @@ from rotstar_mrcal.capture.simulated import (
     write_player_recording,
 )
 from rotstar_mrcal.capture.backend_replay import ReplaySource
-from rotstar_mrcal.pattern.layout import make_layout
-from rotstar_mrcal.pattern.loop import entry_holds, player_loop, unspared
+from rotstar_mrcal.pattern.layout import make_layout, unspared
+from rotstar_mrcal.pattern.loop import entry_holds, player_loop
 
 LAYOUT = make_layout(screen=(800, 600), pitch=100, band=24)
 LOOP = player_loop(LAYOUT.frames())
@@ -237,3 +237,39 @@ def test_auto_with_short_holds(tmp_path, run_cli, capsys):
     out, err = capsys.readouterr()
     assert code == 0 and err.count("board complete (24/24)") == 2, err
     assert len(re.findall(r"pose00[01]: [\d.]+ s at the screen", err)) == 2, err
+
+
+def test_default_capture_without_an_identity_frame(tmp_path, run_cli, capsys, monkeypatch):
+    """rotstar-capture with its defaults (the short holds, --until-enough) on a replay whose camera lost every frame
+    that saw identity_03 and the checkerboard: the pose is written without them after the first look (2.7 s here),
+    says so, and rotstar-detect reads the whole board from the other identity frames"""
+    from rotstar_mrcal.cli.capture import main as rotstar_capture
+
+    model = simulate.preset_model("pinhole-small")
+    rt = simulate.random_poses(model, LAYOUT, 1, np.random.default_rng(3))[0]
+    E = loop_irradiance(LAYOUT, model, rt, supersample=2)
+    sched = player_schedule(N, HOLDS, duration=13.0, start_entry=5, start_phase=0.4)
+    gone = {k for k, e in enumerate(LOOP) if e["file"] in ("identity_03.png", "checkerboard.png")}
+    truth: list = []
+    camera_stream(E, sched, 300, fps=FPS, exposure_s=EXPOSURE, rng=1, truth=truth)
+    lost = [i for i, (e, _) in enumerate(truth) if e in gone]
+    frames, seq = camera_stream(E, sched, 300, fps=FPS, exposure_s=EXPOSURE, rng=1, drop_frames=lost)
+    np.save(tmp_path / "rec.npy", frames)
+    (tmp_path / "rec.json").write_text(json.dumps({"sequence": seq.tolist(), "fps": FPS}))
+    (tmp_path / "pattern").mkdir()
+    (tmp_path / "pattern" / "pattern.json").write_text(LAYOUT.to_json())
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n"))
+    code = rotstar_capture(["--backend", "replay", "--device", str(tmp_path / "rec.npy"), "--pattern",
+                            str(tmp_path / "pattern"), "--poses", "1", "--out", str(tmp_path / "seq")])
+    err = capsys.readouterr().err
+    assert code == 0 and "board complete (24/24)" in err, err
+    assert "pose000: written without identity_03.png, checkerboard.png (not seen clean" in err, err
+    assert "pose000: 2.7 s at the screen" in err and "source ended" not in err, err  # one loop (157 refreshes at
+    #                                                                               60 Hz) and two camera frames
+    pose = tmp_path / "seq" / "pose000"
+    assert not (pose / "identity_03.png").exists() and (pose / "identity_02.png").exists()
+    assert json.loads((pose / "segment.json").read_text())["missing"] == ["identity_03.png", "checkerboard.png"]
+    r = run_cli("rotstar-detect", tmp_path / "seq", "-o", tmp_path / "corners.vnl")
+    assert r.returncode == 0 and "pose000: identity_03.png missing" in r.stderr, r.stderr
+    rows = [ln.split() for ln in (tmp_path / "corners.vnl").read_text().splitlines() if "/pose000/" in ln]
+    assert len(rows) == 24 and all(r[1] != "-" for r in rows), rows
