@@ -43,7 +43,7 @@ import cv2
 import numpy as np
 
 from rotstar_mrcal.atomic import atomic_folder, atomic_path
-from rotstar_mrcal.pattern.layout import Layout, layout_from_dict
+from rotstar_mrcal.pattern.layout import SPARE_KINDS, Layout, layout_from_dict
 
 
 class DatasetError(Exception):
@@ -258,8 +258,8 @@ def read_image(fn: str) -> tuple[np.ndarray, float]:
     raise DatasetError(f"{fn}: pixel type {img.dtype}; expected 8- or 16-bit grayscale")
 
 
-MAX_MISSING_IDENTITY = 1
-OPTIONAL_KINDS = ("checkerboard", "star")  # frames a pose may lack (load_pose gives None)
+MAX_MISSING_IDENTITY = SPARE_KINDS["identity"]
+OPTIONAL_KINDS = tuple(k for k in SPARE_KINDS if k != "identity")  # frames a pose may lack (load_pose gives None)
 """Identity frames a pose may lack: IdentityCode.decode reads every element from the others (one erasure;
 a short capture may miss one identity frame's display). The rotating-star frames are all needed."""
 

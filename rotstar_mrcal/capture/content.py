@@ -49,7 +49,7 @@ pass or several), with holds as short as two camera frames:
    between visits of the same class far apart, per camera frame; times the
    frames spanned it must stay below max_motion px;
 6. every frame of pattern.json must have a class, but for those a pose can
-   do without (pattern.loop.SPARE_KINDS: one identity frame, the
+   do without (pattern.layout.SPARE_KINDS: one identity frame, the
    checkerboard; opts.content_spare): a missing one raises SegmentError
    naming it; the spared ones are listed in Segmentation.missing.
 
@@ -74,8 +74,8 @@ from rotstar_mrcal.capture.motion import difference_signal, downsample, image_sh
 from rotstar_mrcal.capture.segment_base import (
     LoopVerdict, Options, Segmentation, SegmentError, Stretch, _mean, check_order, threshold,
 )
-from rotstar_mrcal.pattern.layout import Layout
-from rotstar_mrcal.pattern.loop import entry_holds, expected_levels, player_loop, unspared
+from rotstar_mrcal.pattern.layout import Layout, unspared
+from rotstar_mrcal.pattern.loop import entry_holds, expected_levels, player_loop
 
 
 def frame_vectors(frames, full_scale: float, step: int, mask: np.ndarray | None) -> np.ndarray:

@@ -39,7 +39,7 @@ class Options:
     marker_hold: int = 0  # content: the start marker's hold (0: as hold says)
     refresh_hz: float = 60.0  # content: the screen's refresh rate (with times in seconds: each entry's time)
     content_timing: float = 1.0  # content: a visit's time may be off by this many (mean of two) entry durations
-    content_spare: bool = True  # content: a pose may lack the frames pattern.loop.SPARE_KINDS allows (one identity
+    content_spare: bool = True  # content: a pose may lack the frames pattern.layout.SPARE_KINDS allows (one identity
     #                             frame, the checkerboard); False: every frame of pattern.json or SegmentError
     content_blend_z: float = 6.0  # content: a camera frame blending in the entry before or after by this many sigmas
     #                               in some rows is not averaged (content.blend_free; 0: every clean frame averaged)
@@ -84,7 +84,7 @@ class Segmentation:
     method: str = "loop"  # how it was split: 'loop' (between start markers) or 'content' (capture.content)
     used: dict[str, list[int]] | None = None  # content: pattern.json file -> every camera frame averaged
     missing: list[str] = dataclasses.field(default_factory=list)  # content: files not seen clean, which the pose
-    #                                                               can do without (pattern.loop.unspared)
+    #                                                               can do without (pattern.layout.unspared)
 
     @property
     def loop(self) -> LoopVerdict:

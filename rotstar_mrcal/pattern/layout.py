@@ -376,6 +376,26 @@ def _get(d: dict, field: str, default=None, kind=int, lo=None, hi=None):
 
 FRAME_KINDS = ("rotstar", "identity", "phase", "checkerboard", "star")
 
+SPARE_KINDS = {"identity": 1, "checkerboard": 1, "star": 1}
+"""Frames a pose may lack, per kind, and still be detected: one identity frame (the identity code has a
+constant weight, so one erased frame's bit is what the others leave: pattern.identity.IdentityCode.decode)
+and the checkerboard and the star frame (read only by the peers' refinements, never by rotstar's)."""
+
+
+def unspared(frames: list[dict], missing: list[str]) -> list[str]:
+    """The files of `missing` that a pose cannot do without (SPARE_KINDS), in pattern.json's order
+
+    >>> frames = [{"file": "r0", "kind": "rotstar"}, {"file": "i0", "kind": "identity"},
+    ...           {"file": "i1", "kind": "identity"}, {"file": "cb", "kind": "checkerboard"}]
+    >>> unspared(frames, ["i1", "cb"]), unspared(frames, ["i0", "i1"]), unspared(frames, ["r0"])
+    ([], ['i0', 'i1'], ['r0'])
+    """
+    kind = {f["file"]: f["kind"] for f in frames}
+    counts: dict[str, int] = {}
+    for f in missing:
+        counts[kind.get(f)] = counts.get(kind.get(f), 0) + 1
+    return [f["file"] for f in frames if f["file"] in missing and counts[f["kind"]] > SPARE_KINDS.get(f["kind"], 0)]
+
 
 def _check_frames(frames) -> int:
     """The "frames" list: file names and kinds; returns the number of rotating-star frames"""

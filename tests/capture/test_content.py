@@ -132,7 +132,7 @@ def test_a_missing_frame_is_named(E):
 
 
 def test_one_identity_frame_and_the_checkerboard_are_spared(E):
-    """One identity frame and the checkerboard lost: the pose is split without them (pattern.loop.SPARE_KINDS),
+    """One identity frame and the checkerboard lost: the pose is split without them (pattern.layout.SPARE_KINDS),
     every other frame clean and in its place; with content_spare=False it is refused, naming them"""
     frames, seq = lose(E, ["identity_03.png", "checkerboard.png"])
     seg = segment_content(frames, LAYOUT.frames(), LAYOUT, 65535.0, OPTS, times=seq / FPS)
