@@ -25,12 +25,13 @@ takes minutes; the default 23-entry sequence takes 15 % longer per loop.
 Settings:
 
 - today: every entry held 30 refreshes, 2.2 loops recorded (22.0 s for this
-  pattern, 25.3 s for the default one);
+  pattern, 25.3 s for the default one): the default before issue 23;
 - short: pattern.loop.SHORT_HOLDS (the rotating star 11 refreshes, the
   identity frames and the checkerboard 6, the start marker 3), recorded
-  until every frame has two clean camera frames (--until-enough: one loop
-  and two camera frames first, then a third as much at a time, at most 2.2
-  loops).
+  until every frame the pose needs has two clean camera frames
+  (--until-enough: one loop and two camera frames first, then a third as
+  much at a time, at most 2.2 loops; one identity frame and the
+  checkerboard may be missing, pattern.layout.SPARE_KINDS): the default.
 
 (a) the same poses (--poses of them) captured both ways; (b) short poses, more of
 them, until the same total time at the screen is spent (the recording plus

@@ -29,7 +29,7 @@ from rotstar_mrcal.capture.session import (
 )
 from rotstar_mrcal.capture.source import CaptureError, ControlError, FrameSource, skip
 from rotstar_mrcal.pattern.loop import entry_holds, player_loop
-from rotstar_mrcal.pattern.player import DEFAULT_HOLD
+from rotstar_mrcal.pattern.player import DEFAULT_HOLD, hold_text
 from rotstar_mrcal.cli.common import (
     EXIT_FAILED, EXIT_INTERRUPTED, HelpFormatter, atomic_write, check_output_path, exit_status_help, fail,
     out_line, run, say, size_arg,
@@ -126,6 +126,8 @@ def parse_args(argv=None):
                 add_segment_options):
         add(p)
     a = p.parse_args(argv)
+    if a.until_enough is None:
+        a.until_enough = a.hold is None
     if not a.list and not a.snapshot and (not a.pattern or not a.out):
         p.error("--pattern and --out are needed (or --list, --snapshot)")
     if a.backend == "replay" and a.exposure not in (None, "keep"):
@@ -202,12 +204,13 @@ def _recording_arguments(p) -> None:
     r.add_argument("--frames", type=int, help="camera frames per recording (default: --loops loops of the player)")
     r.add_argument("--loops", type=float, default=2.2, help="player loops per recording (default 2.2: at least one "
                                                             "whole loop wherever the recording starts)")
-    r.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD, help=f"{HOLD_HELP} (default {DEFAULT_HOLD})")
+    r.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD, help=f"{HOLD_HELP} (default {hold_text(DEFAULT_HOLD)})")
     r.add_argument("--refresh", type=float, default=60.0, help="the screen's refresh rate, Hz (default 60)")
-    r.add_argument("--until-enough", action="store_true",
+    r.add_argument("--until-enough", action=argparse.BooleanOptionalAction,
                    help="record one loop of the player and two frames, then more, until every frame of pattern.json "
-                        "has two clean camera frames (split by their content); the recording's length "
-                        "(--loops, --frames) is the limit. Says the seconds each pose took")
+                        "the pose needs has two clean camera frames (split by their content; one identity frame and "
+                        "the checkerboard may be missing); the recording's length (--loops, --frames) is the limit. "
+                        "Says the seconds each pose took (default: on with the short holds, off with --hold N)")
     r.add_argument("--poses", type=int, default=0, help="stop after this many poses (default: until q or the end of a replay)")
     r.add_argument("--auto", action="store_true",
                    help="start the next pose when the view has moved and then been still for --still seconds")

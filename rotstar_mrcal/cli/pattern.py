@@ -10,7 +10,7 @@ import sys
 
 import cv2
 
-from rotstar_mrcal.pattern.player import DEFAULT_HOLD, write_player
+from rotstar_mrcal.pattern.player import DEFAULT_HOLD, hold_text, write_player
 from rotstar_mrcal.cli.common import HOLD_HELP, hold_arg
 from rotstar_mrcal.pattern.layout import make_layout
 from rotstar_mrcal.pattern.render import encode_display, render_frame
@@ -57,7 +57,7 @@ def parse_args(argv=None):
                                 formatter_class=HelpFormatter)
     p.add_argument("--out", "-o", default="pattern", help="output folder (default ./pattern)")
     p.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD, help=f"player.html's {HOLD_HELP} (default "
-                   f"{DEFAULT_HOLD}; the page's #hold=N changes it)")
+                   f"{hold_text(DEFAULT_HOLD)}; the page's #hold=N changes it)")
     p.add_argument("--screen", type=size_arg, default=(2360, 1640), help="screen size in display pixels (default 2360x1640)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--ppi", type=number_arg(float, 0, lo_open=True), default=264.0, help="display pixels per inch (default 264)")

@@ -20,7 +20,7 @@ from rotstar_mrcal.capture.segment import SegmentError, segment
 from rotstar_mrcal.capture.source import CaptureError
 from rotstar_mrcal.cli.segment_args import add_segment_options, options_from
 from rotstar_mrcal.cli.common import HOLD_HELP, hold_arg
-from rotstar_mrcal.pattern.player import DEFAULT_HOLD
+from rotstar_mrcal.pattern.player import DEFAULT_HOLD, hold_text
 from rotstar_mrcal.atomic import whole_or_none
 from rotstar_mrcal.cli.common import (
     EXIT_FAILED, HelpFormatter, atomic_path, atomic_write, check_output_path, exit_status_help, fail,
@@ -92,7 +92,7 @@ def parse_args(argv=None):
     p.add_argument("--force", action="store_true", help="overwrite a pose folder that already holds frames")
     add_segment_options(p)
     p.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD,
-                   help=f"{HOLD_HELP} (default {DEFAULT_HOLD}); used to tell the frames apart by their content when "
+                   help=f"{HOLD_HELP} (default {hold_text(DEFAULT_HOLD)}); used to tell the frames apart by their content when "
                         f"no whole loop between two start markers was recorded")
     p.add_argument("--refresh", type=float, default=60.0, help="the screen's refresh rate, Hz (default 60)")
     return p.parse_args(argv)

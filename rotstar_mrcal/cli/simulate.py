@@ -45,7 +45,7 @@ from rotstar_mrcal.simulate.rig import RIGS, rig_cameras, rig_poses, write_rig_d
 from rotstar_mrcal.simulate.screen import exact_frames, png_frames, shown_light
 from rotstar_mrcal.cli.common import HOLD_HELP, hold_arg
 from rotstar_mrcal.capture.simulated import ALL_FLAWS, Flaws, write_player_recording
-from rotstar_mrcal.pattern.player import DEFAULT_HOLD
+from rotstar_mrcal.pattern.player import DEFAULT_HOLD, hold_text
 from rotstar_mrcal.cli.common import (
     EXIT_CODES_HELP, EXIT_FAILED, HelpFormatter, check_output_path, fail, number_arg, out_line, run,
 )
@@ -240,7 +240,7 @@ def _recording_arguments(p) -> None:
                         "loops and a bit, then moving for a second), as REC.npy + REC.json: the recording that "
                         "rotstar-segment and rotstar-capture --backend replay read; no ground truth, no --out")
     r.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD,
-                   help=f"{HOLD_HELP} (default {DEFAULT_HOLD}; give rotstar-capture the same --hold)")
+                   help=f"{HOLD_HELP} (default {hold_text(DEFAULT_HOLD)}; give rotstar-capture the same --hold)")
     r.add_argument("--refresh", type=number_arg(float, 0, lo_open=True), default=60.0, help="screen refresh rate, Hz")
     r.add_argument("--fps", type=number_arg(float, 0, lo_open=True), default=25.0, help="camera frame rate")
     r.add_argument("--loops", type=number_arg(float, 0, lo_open=True), default=2.2,

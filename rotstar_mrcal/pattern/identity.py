@@ -40,7 +40,7 @@ One identity frame missing from a recording (its levels NaN) is still read:
 the other n - 1 frames hold w ones (the missing bit is 0) or w - 1 (it is
 1), and the same gap rule picks which (rejected when both or neither
 pass). With d = 4 the word so completed plus one misread bit is never a
-codeword (tests/pattern/test_identity.py checks every case), so a missing
+codeword (tests/pattern/test_identity_erasure.py checks every case), so a missing
 frame costs no label safety; two missing frames are not read.
 """
 

@@ -54,8 +54,19 @@ from rotstar_mrcal.pattern.layout import layout_from_dict
 from rotstar_mrcal.pattern.loop import SHORT_HOLDS, entry_holds, player_loop
 
 TEMPLATE = "player_template.html"
-DEFAULT_HOLD = 30
-"""Display refreshes per loop entry: 0.5 s at 60 Hz, 12 frames of a 25 fps camera"""
+DEFAULT_HOLD = None
+"""Display refreshes per loop entry: None, each frame kind its own (pattern.loop.SHORT_HOLDS: a 2.9 s loop of
+the default sequence at 60 Hz, which rotstar-capture takes in about 3 s a pose); a number holds every kind that
+many refreshes (30, the default before issue 23: 0.5 s at 60 Hz, an 11.5 s loop)"""
+
+
+def hold_text(hold: int | None) -> str:
+    """A hold as --hold takes it
+
+    >>> hold_text(None), hold_text(30)
+    ('short', '30')
+    """
+    return "short" if hold is None else str(hold)
 
 
 def player_config(pattern: dict, pngs: dict[str, bytes], hold: int | None = DEFAULT_HOLD,
