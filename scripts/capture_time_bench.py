@@ -107,7 +107,7 @@ def row(name, holds, seconds, fps, n, poses, opts):
     print(f"  ({time.time() - t0:.0f} s)", file=sys.stderr)
 
 
-def until_enough(E, layout, fps: float, s: int, extra: int = 2) -> dict:
+def until_enough(E, layout, fps: float, s: int, extra: int = 2, exposure_s: float = 0.008) -> dict:
     """One pose taken as rotstar-capture --hold short --until-enough takes it; its seconds and what was accepted"""
     loop = player_loop(layout.frames())
     holds = entry_holds(loop)
@@ -115,7 +115,7 @@ def until_enough(E, layout, fps: float, s: int, extra: int = 2) -> dict:
     nframes = frames_per_recording(a, holds, fps)
     rng = np.random.default_rng([17, s])
     tr: list = []
-    frames, seq = record_player(E, holds, int(nframes * 1.05) + 2, ALL_FLAWS, fps=fps, exposure_s=0.008,
+    frames, seq = record_player(E, holds, int(nframes * 1.05) + 2, ALL_FLAWS, fps=fps, exposure_s=exposure_s,
                                 start_entry=int(rng.integers(len(loop))), start_phase=float(rng.uniform()), rng=rng,
                                 truth=tr, noise=0.01)
     pattern = layout.to_dict()
@@ -142,7 +142,7 @@ def until_enough(E, layout, fps: float, s: int, extra: int = 2) -> dict:
     return out
 
 
-def until_enough_rows(n: int, poses: int, extra: int = 2) -> None:
+def until_enough_rows(n: int, poses: int, extra: int = 2, exposure_s: float = 0.008) -> None:
     """The --until-enough table (module doc) at 25 and 30 fps"""
     layout = make_layout()
     es = [E for E, _ in scenes(poses, 12, layout, 4)]
@@ -152,7 +152,7 @@ def until_enough_rows(n: int, poses: int, extra: int = 2) -> None:
     print("|---|---|---|---|---|---|---|---|")
     for fps in (25.0, 30.0):
         t0 = time.time()
-        res = [until_enough(es[s % len(es)], layout, fps, s, extra) for s in range(n)]
+        res = [until_enough(es[s % len(es)], layout, fps, s, extra, exposure_s) for s in range(n)]
         secs = np.array([r["seconds"] for r in res])
         print(f"| short holds | {fps:g} | {secs.mean():.2f} / {np.median(secs):.2f} / {np.percentile(secs, 95):.2f} / "
               f"{secs.max():.2f} | "
@@ -170,6 +170,7 @@ def main(argv=None) -> int:
     p.add_argument("--n-until", type=int, default=200, help="--until-enough recordings per frame rate (default 200)")
     p.add_argument("--look-extra", type=int, default=2, help="--n-until: camera frames after one loop in the first "
                    "look (default 2, as cli.capture.first_look)")
+    p.add_argument("--exposure-ms", type=float, default=8.0, help="--n-until: the camera's exposure (default 8 ms)")
     p.add_argument("--poses", type=int, default=6, help="camera poses the recordings cycle through (default 6)")
     a = p.parse_args(argv)
     short = entry_holds(LOOP)
@@ -188,7 +189,7 @@ def main(argv=None) -> int:
             if a.n:
                 row(name, short, seconds, fps, a.n, poses, Options())
     if a.n_until:
-        until_enough_rows(a.n_until, a.poses, a.look_extra)
+        until_enough_rows(a.n_until, a.poses, a.look_extra, a.exposure_ms / 1000)
     return 0
 
 

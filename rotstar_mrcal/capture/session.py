@@ -244,8 +244,8 @@ def record_until_enough(src: FrameSource, buf, first_seq: int, pattern: dict, la
                 got = []
             seq += got
             ended = len(got) < more
-        if ended or len(seq) >= len(buf) or enough(buf[:len(seq)], np.array(seq), pattern, layout, src.full_scale, opts,
-                                          src.fps):
+        if ended or len(seq) >= len(buf) or enough(buf[:len(seq)], np.array(seq), pattern, layout, src.full_scale,
+                                                   opts, src.fps):
             break
         want = seq[-1] - seq[0] + 1 + max(1, opts.until_enough // 3)
     return np.array(seq), ended

@@ -203,8 +203,10 @@ def _recording_arguments(p) -> None:
     r = p.add_argument_group("recording")
     r.add_argument("--frames", type=int, help="camera frames per recording (default: --loops loops of the player)")
     r.add_argument("--loops", type=float, default=2.2, help="player loops per recording (default 2.2: at least one "
-                                                            "whole loop wherever the recording starts)")
-    r.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD, help=f"{HOLD_HELP} (default {hold_text(DEFAULT_HOLD)})")
+                                                            "whole loop wherever the recording starts); with "
+                                                            "--until-enough the most a pose records")
+    r.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD,
+                   help=f"{HOLD_HELP} (default {hold_text(DEFAULT_HOLD)})")
     r.add_argument("--refresh", type=float, default=60.0, help="the screen's refresh rate, Hz (default 60)")
     r.add_argument("--until-enough", action=argparse.BooleanOptionalAction,
                    help="record one loop of the player and two frames, then more, until every frame of pattern.json "

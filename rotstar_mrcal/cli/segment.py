@@ -92,8 +92,8 @@ def parse_args(argv=None):
     p.add_argument("--force", action="store_true", help="overwrite a pose folder that already holds frames")
     add_segment_options(p)
     p.add_argument("--hold", type=hold_arg, default=DEFAULT_HOLD,
-                   help=f"{HOLD_HELP} (default {hold_text(DEFAULT_HOLD)}); used to tell the frames apart by their content when "
-                        f"no whole loop between two start markers was recorded")
+                   help=f"{HOLD_HELP} (default {hold_text(DEFAULT_HOLD)}); used to tell the frames apart by their "
+                        f"content when no whole loop between two start markers was recorded")
     p.add_argument("--refresh", type=float, default=60.0, help="the screen's refresh rate, Hz (default 60)")
     return p.parse_args(argv)
 
