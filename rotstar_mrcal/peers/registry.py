@@ -294,6 +294,15 @@ class Method:
     detail: str = ""  # settings worth a word in a table
     demo: bool = True  # part of make demo's comparison
 
+    @property
+    def peer(self) -> bool:
+        """A peer's method (another pattern's frames), not one of rotstar's own (the rotating-star frames)
+
+        >>> METHODS["saddle"].peer, METHODS["rotstar-psf-sim"].peer
+        (True, False)
+        """
+        return self.needs != "rotstar"
+
     def __call__(self, p: PoseImages) -> Found:
         return self.run(p, *self.args)
 

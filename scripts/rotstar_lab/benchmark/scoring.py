@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from rotstar_mrcal.peers.checkerboard import match_to_reference
+from rotstar_mrcal.peers.registry import METHODS
 
 MATCH_PX = 3.0  # a returned corner farther than this from its true corner makes the board wrong
 START_PERTURB_PX = 0.5  # the refiners that start from rotstar start this far from its corners
@@ -147,7 +148,8 @@ def goals(summary: dict[str, dict], results: dict[str, list[dict]], titles: dict
     >>> g["accuracy"]["ratio"], g["accuracy"]["pass"], g["speed"]["pass"]
     (0.25, True, True)
     """
-    base = {k: s["rms_px"] for k, s in summary.items() if k != "rotstar" and s["rms_px"] is not None}
+    base = {k: s["rms_px"] for k, s in summary.items() if k != "rotstar" and s["rms_px"] is not None
+            and (k not in METHODS or METHODS[k].peer)}  # the baselines: the peers, not rotstar's own variants
     rot = summary["rotstar"]
     out = {}
     if base and rot["rms_px"] is not None:

@@ -148,14 +148,15 @@ def summary_sentence(summary: dict[str, dict], cal: dict[str, dict], npose: int)
     20 simulated poses: rotstar's corners are 0.0060 px RMS from the truth in 0.44 CPU s per pose on one core, the other methods' 0.0085-0.1200 px (best: saddle fit (Lucchese-Mitra)); calibrated with mrcal, rotstar's model is 0.0070 px from the true camera (median over the imager), the best other method's 0.0260 px.
     """
     rot = summary["rotstar"]
-    others = {k: s["rms_px"] for k, s in summary.items() if k != "rotstar" and s["rms_px"] is not None}
+    others = {k: s["rms_px"] for k, s in summary.items() if k != "rotstar" and s["rms_px"] is not None
+              and METHODS[k].peer}  # the peers: rotstar's own variants are not "the other methods"
     text = f"{npose} simulated poses: rotstar's corners are {fmt(rot['rms_px'])} px RMS from the truth in " \
            f"{fmt(rot['cpu_seconds_median'], '.2f')} CPU s per pose on one core"
     if others:
         best = min(others, key=others.get)
         text += (f", the other methods' {min(others.values()):.4f}-{max(others.values()):.4f} px "
                  f"(best: {METHODS[best].title})")
-    med = {k: c["median_px"] for k, c in cal.items() if "median_px" in c and not METHODS[k].variant_of}
+    med = {k: c["median_px"] for k, c in cal.items() if "median_px" in c and (k == "rotstar" or METHODS[k].peer)}
     if "rotstar" in med:
         rest = [v for k, v in med.items() if k != "rotstar"]
         text += f"; calibrated with mrcal, rotstar's model is {med['rotstar']:.4f} px from the true camera " \
