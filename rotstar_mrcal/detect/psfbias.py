@@ -145,10 +145,21 @@ def render_star(kernels: np.ndarray, s: int, normals: np.ndarray, frac: np.ndarr
     with a = n1 . p, b = n2 . p and (U, V) = (n1 . T, n2 . T), T drawn from
     the PSF convolved with the pixel's box: the light binned on a BIN_UV
     grid in (U, V) per frame (linear shares), its joint survival function
-    by cumulative sums, read bilinearly at every pixel. On 16 corners
-    with 0.3-2 waves of coma the simulated bias differs from the FFT
-    rendering's by 0.0003 px RMS (of 0.063 px) at half the time with every
-    tap, 0.0013 px with the taps under TAP_FLOOR left out (at a fifth).
+    by cumulative sums (star_light), read bilinearly at every pixel
+    (star_pixels). On 16 corners with 0.3-2 waves of coma the simulated
+    bias differs from the FFT rendering's by 0.0003 px RMS (of 0.063 px) at
+    half the time with every tap, 0.0013 px with the taps under TAP_FLOOR
+    left out (at a fifth).
+    """
+    light = star_light(kernels, s, normals)
+    return star_pixels(light, normals, frac, half, np.arange(len(normals)))
+
+
+def star_light(kernels: np.ndarray, s: int, normals: np.ndarray) -> tuple[np.ndarray, float]:
+    """(T (N, K, nb + 1, nb + 1), R px) the joint survival function of (n1 . T, n2 . T) per corner and frame
+
+    T[n, k, i, j]: the light of kernel n (with the pixel's box) whose projections on frame k's two normals
+    are in bins >= i and >= j of the BIN_UV grid that starts at -R (render_star).
     """
     N, K = normals.shape[:2]
     kh, kw = kernels.shape[1:]
@@ -174,15 +185,27 @@ def render_star(kernels: np.ndarray, s: int, normals: np.ndarray, frac: np.ndarr
             acc += np.bincount(idx.ravel(), (m[:, None, :] * wu * wv).ravel(), minlength=N * K * nb * nb)
     T = np.zeros((N, K, nb + 1, nb + 1))  # T[i, j]: the light of bins >= i along n1 and >= j along n2
     T[:, :, :nb, :nb] = acc.reshape(N, K, nb, nb)[:, :, ::-1, ::-1].cumsum(2).cumsum(3)[:, :, ::-1, ::-1]
+    return T, R
+
+
+def star_pixels(light: tuple[np.ndarray, float], normals: np.ndarray, frac: np.ndarray, half: int,
+                source: np.ndarray) -> np.ndarray:
+    """(n, K, 2 half + 1, 2 half + 1) the stars of star_light's light[source] (n,) at sub-pixel positions frac (n, 2)
+
+    normals (N, K, 2, 2): those light was made with (source picks them too).
+    """
+    T, R = light
+    nb = T.shape[-1] - 1
+    nrm = normals[source]
     o = np.arange(-half, half + 1)
-    px = (o[None, :] - frac[:, 0, None])[:, None, None, None, :]  # (N, 1, 1, 1, P)
+    px = (o[None, :] - frac[:, 0, None])[:, None, None, None, :]  # (n, 1, 1, 1, P)
     py = (o[None, :] - frac[:, 1, None])[:, None, None, :, None]
-    a = normals[..., 0, None, None] * px + normals[..., 1, None, None] * py  # (N, K, 2, P, P)
+    a = nrm[..., 0, None, None] * px + nrm[..., 1, None, None] * py  # (n, K, 2, P, P)
     xa = np.clip((a + R + BIN_UV / 2) / BIN_UV, 0, nb - 1e-9)
     j = np.floor(xa).astype(np.intp)
     g = xa - j
-    n_ = np.arange(N)[:, None, None, None]
-    k_ = np.arange(K)[None, :, None, None]
+    n_ = np.asarray(source)[:, None, None, None]
+    k_ = np.arange(nrm.shape[1])[None, :, None, None]
     ja, jb, ga, gb = j[:, :, 0], j[:, :, 1], g[:, :, 0], g[:, :, 1]
 
     def at(ia, ib):
@@ -195,7 +218,12 @@ def render_star(kernels: np.ndarray, s: int, normals: np.ndarray, frac: np.ndarr
     return 1 - 2 * pu - 2 * pv + 4 * both
 
 
-def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, chunk: int = 32) -> np.ndarray:
+_RENDER_STAR = render_star
+CHUNK = 32  # corners per mosaic fitted at once
+
+
+def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, chunk: int | None = None,
+                   source: np.ndarray | None = None, light=None) -> np.ndarray:
     """(N, 2) the symmetric fit's corner less the PSF's centre, on the local star rendered through each kernel
 
     corners (N, 2): where the real corners are (their sub-pixel phase is
@@ -203,6 +231,9 @@ def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, 
     the frames are low-passed by before the fit (pipeline.prefilter). The
     patches are tiled into one image per frame and fitted as a pose is: the
     same offsets, damping and stopping rule. NaN where the fit fails.
+    source (N,): corner i's star is that of kernels[source[i]] and
+    normals[source[i]] (one light table per kernel; None: its own); light:
+    star_light(kernels, s, normals) if already made.
     """
     q = np.asarray(corners, float)
     w = np.asarray(windows, float)
@@ -210,12 +241,27 @@ def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, 
     out = np.full((N, 2), np.nan)
     if not N:
         return out
+    chunk = CHUNK if chunk is None else chunk
+    if render_star is not _RENDER_STAR:  # (psfcheck --star-fft swaps the renderer: one kernel per corner)
+        src = np.arange(N) if source is None else np.asarray(source)
+        return _simulated_bias_with(lambda sl, fr, h: render_star(kernels[src[sl]], s, normals[src[sl]], fr, h),
+                                    q, w, lowpass_sigma, chunk)
+    light = star_light(kernels, s, normals) if light is None else light
+    src = np.arange(N) if source is None else np.asarray(source)
+    return _simulated_bias_with(lambda sl, fr, h: star_pixels(light, normals, fr, h, src[sl]), q, w, lowpass_sigma,
+                                chunk)
+
+
+def _simulated_bias_with(star, q, w, lowpass_sigma, chunk):
+    """simulated_bias with star(slice, frac (n, 2), half) -> the patches (n, K, P, P) of corners [slice]"""
+    N = len(q)
+    out = np.full((N, 2), np.nan)
     half = int(np.ceil(w.max())) + int(math.ceil(4 * lowpass_sigma)) + PAD_PX
     P = 2 * half + 1
     frac = q - np.round(q)
     for a in range(0, N, chunk):
         sl = slice(a, min(a + chunk, N))
-        patches = render_star(kernels[sl], s, normals[sl], frac[sl], half)
+        patches = star(sl, frac[sl], half)
         n, K = patches.shape[:2]
         cols = int(math.ceil(math.sqrt(n)))
         rows = int(math.ceil(n / cols))
@@ -351,6 +397,8 @@ def spread_nodes(xy: np.ndarray, n: int) -> np.ndarray:
 
 NODES = 12  # corners per pose where the bias is simulated; a smooth field carries it to the others
 DEGREE = 2  # of that field
+PHASE = False  # bias_correct: every corner's own sub-pixel phase and window simulated on its node's star
+# (doc/blur-map.md: better at coma 1.5, not at 2.5, so not the default)
 COMA_SIGNIFICANCE = 3.0  # a pooled coma below this many standard deviations of its plane is taken as 0
 
 
@@ -401,7 +449,7 @@ def measured_normals(frames, corners, window, shifts=None) -> np.ndarray:
 
 def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lowpass_sigma: float | None = None,
                  nodes: int = NODES, degree: int = DEGREE, optics=None, min_window: float = 4.0,
-                 samples: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+                 samples: tuple[np.ndarray, np.ndarray] | None = None, phase: bool | None = None) -> np.ndarray:
     """(N, 2) the symmetric fit's corners (N, 2) less their simulated bias: the light's centroid
 
     frames (K, H, W) the raw rotating-star frames the corners were fitted on
@@ -412,9 +460,15 @@ def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lo
     or of `samples` (xy, vectors) given (e.g. a dataset's). The local pattern: jac
     (N, 2, 2) camera px per display px with angles (K,) the frames'
     rotations, or (None) the edge normals measured at the nodes. The bias
-    of the same fit on the local star through that PSF (simulated_bias;
-    the kernel computed with its tail along +x and the pattern turned
-    instead) is carried to every corner by a smooth field of `degree`.
+    of the same fit on the local star through that PSF (simulated_bias):
+    phase (None: PHASE, False): every corner's own, on its nearest node's star
+    (kernel and normals) at its own window and at the sub-pixel phase of
+    its estimated centroid, plus the change from the node to it of the
+    smooth field (`degree`) of the nodes' biases at phase 0 (_phase_correct:
+    the fit's offset changes with the corner's phase by some 0.002-0.003 px
+    in a way no smooth field follows); not phase (the default): the nodes'
+    biases (the kernel computed with its tail along +x and the pattern
+    turned instead) carried to every corner by the smooth field.
     Fewer than 2 x the field's terms of corners measured or simulated, or
     no coma at any node: the corners are returned unchanged; a node without
     coma has no bias.
@@ -437,11 +491,36 @@ def bias_correct(frames, corners, window, shifts=None, jac=None, angles=None, lo
     else:
         normals = measured_normals(frames, q[nd], w[nd], None if shifts is None else np.asarray(shifts)[:, nd])
     sigma = lowpass_for(w[idx]) if lowpass_sigma is None else lowpass_sigma
-    kern = _padded([seidel_kernel(ci, 0.0, 0.0, optics) for ci in c])
-    b = _turned(simulated_bias(kern, SUPERSAMPLE, _turned(normals, -a), q[nd], w[nd], sigma), a)
-    b[c == 0] = 0.0  # (the sharp diffraction kernel's own small offsets from the pixel grid are not the lens's)
-    ok = np.isfinite(b).all(axis=1)
+    if not (PHASE if phase is None else phase):
+        kern = _padded([seidel_kernel(ci, 0.0, 0.0, optics) for ci in c])
+        b = _turned(simulated_bias(kern, SUPERSAMPLE, _turned(normals, -a), q[nd], w[nd], sigma), a)
+        b[c == 0] = 0.0  # (the sharp diffraction kernel's own small offsets from the pixel grid are not the lens's)
+        ok = np.isfinite(b).all(axis=1)
+        out = q.copy()
+        if ok.sum() >= enough:
+            out[idx] -= smooth_field(q[nd][ok], b[ok], degree, at=q[idx])
+        return out
+    return _phase_correct(q, idx, nd, w, c, a, normals, sigma, degree, optics)
+
+
+def _phase_correct(q, idx, nd, w, c, a, normals, sigma, degree, optics) -> np.ndarray:
+    """bias_correct (phase): every corner on its node's star at its own window and at the sub-pixel phase of where
+    its light's centroid is, plus the change from its node to it of the smooth field of the nodes' biases at
+    phase 0 (the bias is smooth over the image at a fixed phase, not from corner to corner at theirs)"""
+    kern = _padded([seidel_kernel(ci, 0.0, ai, optics) for ci, ai in zip(c, a)])  # (not turned: the pixels do not)
+    light = star_light(kern, SUPERSAMPLE, normals)
+    b0 = simulated_bias(kern, SUPERSAMPLE, normals, np.round(q[nd]), w[nd], sigma, light=light)
+    b0[c == 0] = 0.0  # (the sharp diffraction kernel's own small offsets from the pixel grid are not the lens's)
+    ok = np.isfinite(b0).all(axis=1)
     out = q.copy()
-    if ok.sum() >= enough:
-        out[idx] -= smooth_field(q[nd][ok], b[ok], degree, at=q[idx])
+    if ok.sum() < (degree + 1) * (degree + 2):
+        return out
+    field = smooth_field(q[nd][ok], b0[ok], degree, at=np.concatenate((q[idx], q[nd])))
+    near = np.argmin(np.linalg.norm(q[idx, None] - q[nd][None], axis=2), axis=1)  # each corner's node
+    near[np.searchsorted(idx, nd)] = np.arange(len(nd))  # (a node is its own)
+    guess = field[:len(idx)]
+    own = simulated_bias(kern, SUPERSAMPLE, normals, q[idx] - guess, w[idx], sigma, source=near, light=light)
+    own[c[near] == 0] = 0.0
+    step = own + guess - field[len(idx):][near]
+    out[idx] -= np.where(np.isfinite(step).all(axis=1)[:, None], step, guess)
     return out

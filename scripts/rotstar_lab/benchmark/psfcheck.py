@@ -30,14 +30,19 @@ simbias-true (the simulator's own kernel at each corner and the true element
 geometry), simbias-nodes-S-N-D (the same at N corners, S sub-pixels per px,
 a field of degree D between), simbias-moments-L (a Gram-Charlier kernel of
 the true kernel's moments clipped to L px, 0: edgespread's reach),
-simbias-est (psf-sim's estimate with the true geometry). --noise 0 renders
+simbias-est (psf-sim's estimate with the true geometry), simbias-truecoma
+(psf-sim's model and scheme given the lens's own coma, the true geometry),
+simbias-seidel (every corner simulated through the Seidel PSF at that point,
+the lens's coma and focus: LensPSF without the blending between its
+nodes). --noise 0 renders
 noiseless frames, --no-display-maps leaves the per-frame display maps out.
 The floor's suspects (doc/blur-map.md): --tiled PX renders through the
 former piecewise-constant PSF (optics.TiledPSF, PX-px tiles from the rendered
 region's corner; simbias-true then takes the Seidel kernel at the corner),
 --tap-floor F and --star-fft change psfbias's own approximations (the
 kernel taps left out; the FFT rendering of the local star instead of the
-binned one).
+binned one); --phase runs psf-sim with psfbias.PHASE (every corner's own
+sub-pixel phase simulated on its node's star).
 
 Printed: per method the RMS of the corner error against the truth, and its
 pose-dependent part: the error minus the mean error of its image cell
@@ -257,6 +262,31 @@ def simbias_true(pc, truth, psf, layout, reach=None) -> np.ndarray:
     return q
 
 
+def true_coma(a, xy: np.ndarray, imagersize) -> np.ndarray:
+    """(N, 2) the lens's coma at image points xy (waves along the tail: LensPSF's coma x field radius, outward)"""
+    c = (np.array(imagersize, float) - 1) / 2
+    return a.coma * (xy - c) / np.hypot(*c)
+
+
+def simbias_seidel(pc, truth, a, layout, imagersize) -> np.ndarray:
+    """simbias_true with, at every corner, the Seidel PSF at that point (coma and focus of LensPSF's field, no
+    blending between the simulator's nodes): what psf-sim's model of the PSF leaves with the true parameters"""
+    from rotstar_mrcal.optics.psf import wavefront_psf
+    q = pc.corners.copy()
+    j, i = np.nonzero(np.isfinite(q[..., 0]))
+    J = grid_jacobian(truth, float(layout.pitch))[j, i]
+    n = star_normals(J, np.array([layout.angle(k) for k in range(layout.nframes)]))
+    c = (np.array(imagersize, float) - 1) / 2
+    ks = []
+    for p in q[j, i]:
+        h = np.hypot(*(p - c)) / np.hypot(*c)
+        ang = math.atan2(p[1] - c[1], p[0] - c[0])
+        ks.append(wavefront_psf(Seidel(tilt=-a.coma * h, coma=a.coma * h, focus=a.focus * h * h, tilt_angle=ang,
+                                       coma_angle=ang)))
+    q[j, i] -= simulated_bias(psfbias._padded(ks), 4, n, q[j, i], pc.window[j, i], pc.prefilter_px)
+    return q
+
+
 def samples_from(model, layout, psf, a, dist, fs, mc):
     """coma_samples of the poses at distances dist (near, far), the same lens, npose and seed (renders cached)"""
     tag = f"g{a.gaussian:g}" if a.gaussian > 0 else f"c{a.coma:g}f{a.focus:g}" + (f"-tiled{a.tiled}" if a.tiled else "")
@@ -351,6 +381,9 @@ def main(argv=None):
                    help="render through the former piecewise-constant PSF (TiledPSF, PX-px tiles)")
     p.add_argument("--tap-floor", type=float, help="psfbias.TAP_FLOOR (0: every kernel tap)")
     p.add_argument("--star-fft", action="store_true", help="psfbias renders the local star by FFT (render_star_fft)")
+    p.add_argument("--phase", action="store_true",
+                   help="psf-sim simulates every corner's own sub-pixel phase and window on its node's star, not "
+                        "only the 12 nodes' biases carried by a smooth field (psfbias.PHASE)")
     p.add_argument("--methods", default="symmetric,psf,saddle")
     p.add_argument("--distance", default="", help="near,far metres (default: random_poses' range)")
     p.add_argument("--coma-from", metavar="NEAR,FAR",
@@ -376,6 +409,8 @@ def main(argv=None):
         psfbias.TAP_FLOOR = a.tap_floor
     if a.star_fft:
         psfbias.render_star = psfbias.render_star_fft
+    if a.phase:
+        psfbias.PHASE = True
     dist = tuple(float(v) for v in a.distance.split(",")) if a.distance else None
     rts = simulate.random_poses(model, layout, a.npose, np.random.default_rng([3, a.seed]), distance=dist)
     if dist:
@@ -419,6 +454,18 @@ def main(argv=None):
                                          jac=grid_jacobian(truth, float(layout.pitch))[jj, ii],
                                          angles=np.array([layout.angle(k) for k in range(layout.nframes)]),
                                          lowpass_sigma=pc.prefilter_px)
+            elif m == "simbias-truecoma":  # psf-sim's model and scheme with the lens's coma and the true geometry
+                pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
+                q = pc.corners.copy()
+                jj, ii = np.nonzero(np.isfinite(q[..., 0]))
+                q[jj, ii] = bias_correct(frames, q[jj, ii], pc.window[jj, ii],
+                                         jac=grid_jacobian(truth, float(layout.pitch))[jj, ii],
+                                         angles=np.array([layout.angle(k) for k in range(layout.nframes)]),
+                                         lowpass_sigma=pc.prefilter_px,
+                                         samples=(q[jj, ii], true_coma(a, q[jj, ii], model.imagersize())))
+            elif m == "simbias-seidel":
+                q = simbias_seidel(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, a, layout,
+                                   model.imagersize())
             elif m == "simbias-true":
                 q = simbias_true(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout)
             elif m.startswith("simbias-moments"):  # simbias-moments-L: clipped to L px (0: edgespread's reach)
