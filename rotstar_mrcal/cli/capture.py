@@ -126,8 +126,8 @@ def parse_args(argv=None):
                 add_segment_options):
         add(p)
     a = p.parse_args(argv)
-    if a.until_enough is None:
-        a.until_enough = a.hold is None
+    if a.until_enough is None:  # the short holds record until enough, unless a length was asked for
+        a.until_enough = a.hold is None and not a.frames
     if not a.list and not a.snapshot and (not a.pattern or not a.out):
         p.error("--pattern and --out are needed (or --list, --snapshot)")
     if a.backend == "replay" and a.exposure not in (None, "keep"):
@@ -212,7 +212,8 @@ def _recording_arguments(p) -> None:
                    help="record one loop of the player and two frames, then more, until every frame of pattern.json "
                         "the pose needs has two clean camera frames (split by their content; one identity frame and "
                         "the checkerboard may be missing); the recording's length (--loops, --frames) is the limit. "
-                        "Says the seconds each pose took (default: on with the short holds, off with --hold N)")
+                        "Says the seconds each pose took (default: on with the short holds, off with --hold N or "
+                        "--frames N)")
     r.add_argument("--poses", type=int, default=0, help="stop after this many poses (default: until q or the end of a replay)")
     r.add_argument("--auto", action="store_true",
                    help="start the next pose when the view has moved and then been still for --still seconds")

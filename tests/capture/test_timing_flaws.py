@@ -247,13 +247,13 @@ def test_default_capture_without_an_identity_frame(tmp_path, run_cli, capsys, mo
 
     model = simulate.preset_model("pinhole-small")
     rt = simulate.random_poses(model, LAYOUT, 1, np.random.default_rng(3))[0]
-    E = loop_irradiance(LAYOUT, model, rt, supersample=2)
-    sched = player_schedule(N, HOLDS, duration=13.0, start_entry=5, start_phase=0.4)
+    E = loop_irradiance(LAYOUT, model, rt, supersample=1)
+    sched = player_schedule(N, HOLDS, duration=9.0, start_entry=5, start_phase=0.4)
     gone = {k for k, e in enumerate(LOOP) if e["file"] in ("identity_03.png", "checkerboard.png")}
     truth: list = []
-    camera_stream(E, sched, 300, fps=FPS, exposure_s=EXPOSURE, rng=1, truth=truth)
+    camera_stream(E, sched, 200, fps=FPS, exposure_s=EXPOSURE, rng=1, truth=truth)
     lost = [i for i, (e, _) in enumerate(truth) if e in gone]
-    frames, seq = camera_stream(E, sched, 300, fps=FPS, exposure_s=EXPOSURE, rng=1, drop_frames=lost)
+    frames, seq = camera_stream(E, sched, 200, fps=FPS, exposure_s=EXPOSURE, rng=1, drop_frames=lost)
     np.save(tmp_path / "rec.npy", frames)
     (tmp_path / "rec.json").write_text(json.dumps({"sequence": seq.tolist(), "fps": FPS}))
     (tmp_path / "pattern").mkdir()

@@ -48,13 +48,17 @@ def test_every_element_read_with_any_one_frame_missing(poses):
             assert ids.misordered == ()
 
 
-def test_same_labels_and_corners_with_any_one_frame_missing(poses):
+SOME_FRAMES = (0, 4, 9)  # the first, a middle and the last of the 10 (every one in turn: the reading test above;
+#                          the corners measured with every frame missing in turn: CORNER_AGREE_PX)
+
+
+def test_same_labels_and_corners_with_one_frame_missing(poses):
     for p, truth in poses:
         whole = detect_pose(p.rotstar, LAYOUT, full_scale=p.full_scale, identity=p.identity)
         assert whole.found, whole.error
         seen = np.isfinite(whole.corners[..., 0])
         assert np.linalg.norm(whole.corners - truth, axis=-1)[seen].max() < 0.1
-        for k in range(LAYOUT.identity_code.nframes):
+        for k in SOME_FRAMES:
             r = detect_pose(p.rotstar, LAYOUT, full_scale=p.full_scale, identity=without(p.identity, k))
             assert r.found, (k, r.error)
             assert np.array_equal(np.isfinite(r.corners[..., 0]), seen), k

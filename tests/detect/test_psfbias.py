@@ -1,6 +1,7 @@
 """Bias by simulation (detect/psfbias.py): the symmetric fit's offset under coma, found and taken off"""
 
 import numpy as np
+import pytest
 
 from rotstar_mrcal.detect import psfbias
 from rotstar_mrcal.detect.pipeline import PoseCorners
@@ -91,6 +92,7 @@ def test_a_dataset_lends_its_coma_to_a_pose_that_shows_none():
         assert np.allclose(p.correction.reshape(-1, 2), p.corners.reshape(-1, 2) - q)
 
 
+@pytest.mark.slow  # psfbias.PHASE is off by default (doc/blur-map.md); make test keeps bias_correct's default path
 def test_each_corner_s_sub_pixel_phase_is_simulated(monkeypatch):
     """PHASE: every corner on its node's star at its own phase takes off what a smooth field of 12 nodes cannot"""
     monkeypatch.setattr(psfbias, "TAP_FLOOR", 1e-6)  # (the stars below are rendered with every tap)
