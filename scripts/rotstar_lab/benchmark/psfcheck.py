@@ -446,23 +446,17 @@ def main(argv=None):
                 S, NN, D = (int(v) for v in m.split("-")[2:5])
                 q = simbias_nodes(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, psf, layout,
                                   S, NN, D)
-            elif m == "simbias-est":  # the estimated PSF, the true geometry and the raw frames
+            elif m in ("simbias-est", "simbias-truecoma"):  # psf-sim's model and scheme with the true geometry,
+                # the coma estimated from the raw frames or the lens's own
                 pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
                 q = pc.corners.copy()
                 jj, ii = np.nonzero(np.isfinite(q[..., 0]))
+                coma = {"samples": (q[jj, ii], true_coma(a, q[jj, ii], model.imagersize()))} \
+                    if m == "simbias-truecoma" else {}
                 q[jj, ii] = bias_correct(frames, q[jj, ii], pc.window[jj, ii],
                                          jac=grid_jacobian(truth, float(layout.pitch))[jj, ii],
                                          angles=np.array([layout.angle(k) for k in range(layout.nframes)]),
-                                         lowpass_sigma=pc.prefilter_px)
-            elif m == "simbias-truecoma":  # psf-sim's model and scheme with the lens's coma and the true geometry
-                pc = detect_pose(frames, layout, full_scale=fs, check_motion=mc)
-                q = pc.corners.copy()
-                jj, ii = np.nonzero(np.isfinite(q[..., 0]))
-                q[jj, ii] = bias_correct(frames, q[jj, ii], pc.window[jj, ii],
-                                         jac=grid_jacobian(truth, float(layout.pitch))[jj, ii],
-                                         angles=np.array([layout.angle(k) for k in range(layout.nframes)]),
-                                         lowpass_sigma=pc.prefilter_px,
-                                         samples=(q[jj, ii], true_coma(a, q[jj, ii], model.imagersize())))
+                                         lowpass_sigma=pc.prefilter_px, **coma)
             elif m == "simbias-seidel":
                 q = simbias_seidel(detect_pose(frames, layout, full_scale=fs, check_motion=mc), truth, a, layout,
                                    model.imagersize())
