@@ -43,7 +43,7 @@ import cv2
 import numpy as np
 
 from rotstar_mrcal.atomic import atomic_folder, atomic_path
-from rotstar_mrcal.pattern.layout import SPARE_KINDS, Layout, layout_from_dict
+from rotstar_mrcal.pattern.layout import SPARE_KINDS, Layout, layout_from_dict, unspared
 
 
 class DatasetError(Exception):
@@ -259,7 +259,6 @@ def read_image(fn: str) -> tuple[np.ndarray, float]:
 
 
 MAX_MISSING_IDENTITY = SPARE_KINDS["identity"]
-OPTIONAL_KINDS = tuple(k for k in SPARE_KINDS if k != "identity")  # frames a pose may lack (load_pose gives None)
 """Identity frames a pose may lack: IdentityCode.decode reads every element from the others (one erasure;
 a short capture may miss one identity frame's display). The rotating-star frames are all needed."""
 
@@ -513,8 +512,8 @@ def image_size(fn: str) -> tuple[int, int] | None:
 
 
 def as_read(files: set[str], frames: list[dict]) -> set[str]:
-    """The file names of a pose folder, with those load_pose does without added: the checkerboard and star frames
-    (OPTIONAL_KINDS), one identity frame (MAX_MISSING_IDENTITY)
+    """The file names of a pose folder, with those load_pose does without added (pattern.layout.SPARE_KINDS:
+    the checkerboard and star frames, one identity frame)
 
     >>> frames = [{"file": "rotstar_00.png", "kind": "rotstar"}, {"file": "checkerboard.png", "kind": "checkerboard"}
     ...           ] + [{"file": f"identity_{k:02d}.png", "kind": "identity"} for k in range(3)]
@@ -523,9 +522,8 @@ def as_read(files: set[str], frames: list[dict]) -> set[str]:
     >>> sorted(as_read({"rotstar_00.png", "identity_00.png"}, frames))
     ['checkerboard.png', 'identity_00.png', 'rotstar_00.png']
     """
-    ident = {f["file"] for f in frames if f["kind"] == "identity"}
-    optional = {f["file"] for f in frames if f["kind"] in OPTIONAL_KINDS}
-    return files | optional | (ident if len(ident - files) <= MAX_MISSING_IDENTITY else set())
+    missing = [f["file"] for f in frames if f["file"] not in files]
+    return set(files) | (set(missing) - set(unspared(frames, missing)))
 
 
 def read_rig(seq: str, frames: list[dict] | None = None) -> Rig:

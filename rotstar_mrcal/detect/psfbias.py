@@ -218,8 +218,8 @@ def star_pixels(light: tuple[np.ndarray, float], normals: np.ndarray, frac: np.n
     return 1 - 2 * pu - 2 * pv + 4 * both
 
 
-_RENDER_STAR = render_star
 CHUNK = 32  # corners per mosaic fitted at once
+STAR_FFT = False  # simulated_bias renders every corner's star by FFT (render_star_fft; psfcheck --star-fft)
 
 
 def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, chunk: int | None = None,
@@ -242,12 +242,11 @@ def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, 
     if not N:
         return out
     chunk = CHUNK if chunk is None else chunk
-    if render_star is not _RENDER_STAR:  # (psfcheck --star-fft swaps the renderer: one kernel per corner)
-        src = np.arange(N) if source is None else np.asarray(source)
-        return _simulated_bias_with(lambda sl, fr, h: render_star(kernels[src[sl]], s, normals[src[sl]], fr, h),
+    src = np.arange(N) if source is None else np.asarray(source)
+    if STAR_FFT:  # one kernel per corner, no light table
+        return _simulated_bias_with(lambda sl, fr, h: render_star_fft(kernels[src[sl]], s, normals[src[sl]], fr, h),
                                     q, w, lowpass_sigma, chunk)
     light = star_light(kernels, s, normals) if light is None else light
-    src = np.arange(N) if source is None else np.asarray(source)
     return _simulated_bias_with(lambda sl, fr, h: star_pixels(light, normals, fr, h, src[sl]), q, w, lowpass_sigma,
                                 chunk)
 

@@ -167,10 +167,8 @@ class IdentityCode:
         """decode of (N, nframes) levels, every frame recorded: the w brightest are the ones"""
         w = self.weight
         s = -np.sort(-v, axis=1)  # descending
-        hi = np.median(s[:, :w], axis=1)
-        lo = np.median(s[:, w:], axis=1)
+        hi, lo, gap = _split(s, w, self.nframes)
         contrast = hi - lo
-        gap = s[:, w - 1] - s[:, w]
         bits = (v >= s[:, w - 1 : w]).astype(np.uint8)
         index = self._lookup(bits)
         reason = np.full(len(v), "", dtype=object)

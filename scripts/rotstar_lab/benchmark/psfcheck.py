@@ -408,7 +408,7 @@ def main(argv=None):
     if a.tap_floor is not None:
         psfbias.TAP_FLOOR = a.tap_floor
     if a.star_fft:
-        psfbias.render_star = psfbias.render_star_fft
+        psfbias.STAR_FFT = True
     if a.phase:
         psfbias.PHASE = True
     dist = tuple(float(v) for v in a.distance.split(",")) if a.distance else None
