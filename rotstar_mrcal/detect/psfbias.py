@@ -204,12 +204,13 @@ def star_pixels(light: tuple[np.ndarray, float], normals: np.ndarray, frac: np.n
     xa = np.clip((a + R + BIN_UV / 2) / BIN_UV, 0, nb - 1e-9)
     j = np.floor(xa).astype(np.intp)
     g = xa - j
-    n_ = np.asarray(source)[:, None, None, None]
-    k_ = np.arange(nrm.shape[1])[None, :, None, None]
+    m = nb + 1
+    flat = T.reshape(-1)
+    base = ((np.asarray(source)[:, None] * T.shape[1] + np.arange(nrm.shape[1])[None]) * m * m)[:, :, None, None]
     ja, jb, ga, gb = j[:, :, 0], j[:, :, 1], g[:, :, 0], g[:, :, 1]
 
-    def at(ia, ib):
-        return T[n_, k_, ia, ib]
+    def at(ia, ib):  # T[source, k, ia, ib] (np.take on the flat table: a fraction of fancy indexing's time)
+        return np.take(flat, base + ia * m + ib)
 
     both = ((1 - ga) * (1 - gb) * at(ja, jb) + ga * (1 - gb) * at(ja + 1, jb) +
             (1 - ga) * gb * at(ja, jb + 1) + ga * gb * at(ja + 1, jb + 1))
@@ -219,6 +220,7 @@ def star_pixels(light: tuple[np.ndarray, float], normals: np.ndarray, frac: np.n
 
 
 CHUNK = 32  # corners per mosaic fitted at once
+SIM_TOL = 1e-3  # px: the simulated fits stop when a step is below this (as the real fit)
 STAR_FFT = False  # simulated_bias renders every corner's star by FFT (render_star_fft; psfcheck --star-fft)
 
 
@@ -244,23 +246,30 @@ def simulated_bias(kernels, s, normals, corners, windows, lowpass_sigma: float, 
     chunk = CHUNK if chunk is None else chunk
     src = np.arange(N) if source is None else np.asarray(source)
     if STAR_FFT:  # one kernel per corner, no light table
-        return _simulated_bias_with(lambda sl, fr, h: render_star_fft(kernels[src[sl]], s, normals[src[sl]], fr, h),
+        return _simulated_bias_with(lambda sel, fr, h: render_star_fft(kernels[src[sel]], s, normals[src[sel]], fr, h),
                                     q, w, lowpass_sigma, chunk)
     light = star_light(kernels, s, normals) if light is None else light
-    return _simulated_bias_with(lambda sl, fr, h: star_pixels(light, normals, fr, h, src[sl]), q, w, lowpass_sigma,
+    return _simulated_bias_with(lambda sel, fr, h: star_pixels(light, normals, fr, h, src[sel]), q, w, lowpass_sigma,
                                 chunk)
 
 
 def _simulated_bias_with(star, q, w, lowpass_sigma, chunk):
-    """simulated_bias with star(slice, frac (n, 2), half) -> the patches (n, K, P, P) of corners [slice]"""
+    """simulated_bias with star(sel, frac (n, 2), half) -> the patches (n, K, P, P) of corners [sel] (indices)
+
+    The corners go in chunks by increasing window, each chunk's patches as
+    large as its largest window needs (a third of the pixels where the
+    windows range 3-8 px).
+    """
     N = len(q)
     out = np.full((N, 2), np.nan)
-    half = int(np.ceil(w.max())) + int(math.ceil(4 * lowpass_sigma)) + PAD_PX
-    P = 2 * half + 1
+    reach = int(math.ceil(4 * lowpass_sigma)) + PAD_PX
     frac = q - np.round(q)
+    order = np.argsort(w, kind="stable")
     for a in range(0, N, chunk):
-        sl = slice(a, min(a + chunk, N))
-        patches = star(sl, frac[sl], half)
+        sel = order[a:a + chunk]
+        half = int(np.ceil(w[sel].max())) + reach
+        P = 2 * half + 1
+        patches = star(sel, frac[sel], half)
         n, K = patches.shape[:2]
         cols = int(math.ceil(math.sqrt(n)))
         rows = int(math.ceil(n / cols))
@@ -268,9 +277,9 @@ def _simulated_bias_with(star, q, w, lowpass_sigma, chunk):
         r, c = np.divmod(np.arange(n), cols)
         for i in range(n):
             mosaic[:, r[i] * P:(r[i] + 1) * P, c[i] * P:(c[i] + 1) * P] = patches[i]
-        at = np.stack((c * P + half + frac[sl, 0], r * P + half + frac[sl, 1]), -1)
-        fit = symmetric_refine(prefilter(mosaic, lowpass_sigma), at, w[sl])
-        out[sl] = fit.corners - at
+        at = np.stack((c * P + half + frac[sel, 0], r * P + half + frac[sel, 1]), -1)
+        fit = symmetric_refine(prefilter(mosaic, lowpass_sigma), at, w[sel], tol=SIM_TOL)
+        out[sel] = fit.corners - at
     return out
 
 
@@ -282,7 +291,7 @@ SUPERSAMPLE = 4
 
 
 def seidel_kernel(coma: float, focus: float, angle: float, optics=None, s: int = SUPERSAMPLE) -> np.ndarray:
-    """The wavefront PSF of coma (waves, its tail along `angle`) and focus, its centroid put back by tilt = -coma
+    """The wavefront PSF of coma (waves, its tail along `angle`) and focus, its centroid at its centre (as LensPSF's)
 
     As the simulator's lens (optics.psf.LensPSF); cached on the values rounded to KERNEL_STEP and 1 degree.
     """
@@ -294,7 +303,8 @@ def seidel_kernel(coma: float, focus: float, angle: float, optics=None, s: int =
 @functools.lru_cache(maxsize=512)
 def _seidel_kernel(coma, focus, angle_deg, optics, s):
     a = math.radians(angle_deg)
-    return wavefront_psf(Seidel(tilt=-coma, coma=coma, focus=focus, tilt_angle=a, coma_angle=a), optics, s)
+    return wavefront_psf(Seidel(tilt=-coma, coma=coma, focus=focus, tilt_angle=a, coma_angle=a), optics, s,
+                         zero_centroid=True)
 
 
 TABLE_COMA = np.arange(0.0, 4.01, 0.25)  # waves of local coma in the table of measured third moments

@@ -108,15 +108,41 @@ def _psf_grid(seidel: Seidel, optics: Optics, supersample: int):
 
 
 def wavefront_psf(seidel: Seidel, optics: Optics | None = None, supersample: int = 4,
-                  tail: float = DEFAULT_TAIL, max_radius_px: float | None = None) -> np.ndarray:
+                  tail: float = DEFAULT_TAIL, max_radius_px: float | None = None,
+                  zero_centroid: bool = False) -> np.ndarray:
     """PSF kernel of a Seidel wavefront at sub-pixel resolution: odd, centred, unit sum
 
     See the module docstring for the sampling. tail: energy fraction allowed
     outside the crop (0: keep the whole computed grid); max_radius_px caps
-    the crop (camera pixels).
+    the crop (camera pixels). zero_centroid: the kernel's light centroid put
+    on its centre by a tilt added to seidel's (found from the cropped
+    kernel's own centroid, ZERO_CENTROID_STEPS times): a tilt of -coma puts
+    the untruncated PSF's centroid there, but the crop takes coma's one-sided
+    tail and moves it toward the head by 0.01-0.02 px under 1.5 waves,
+    differently at each supersampling.
     """
     optics = Optics() if optics is None else optics
-    m, n_sub, N, R = _psf_grid(seidel, optics, supersample)
+    grid = _psf_grid(seidel, optics, supersample)  # (kept for the added tilt: a grid that changed with it would
+    k = _wavefront_kernel(seidel, grid, tail, max_radius_px, supersample)  # make the centroid jump)
+    if zero_centroid:
+        t = seidel.tilt * np.array((math.cos(seidel.tilt_angle), math.sin(seidel.tilt_angle)))
+        for _ in range(ZERO_CENTROID_STEPS):
+            c = centroid_px(k, supersample)
+            if np.hypot(*c) < ZERO_CENTROID_PX:
+                break
+            t = t - c / (2.0 * optics.lambda_fnum_px)  # a tilt t (waves) moves the light 2 lambda N t px along it
+            k = _wavefront_kernel(dataclasses.replace(seidel, tilt=float(np.hypot(*t)),
+                                                      tilt_angle=float(math.atan2(t[1], t[0]))),
+                                  grid, tail, max_radius_px, supersample)
+    return k
+
+
+ZERO_CENTROID_STEPS = 3
+ZERO_CENTROID_PX = 1e-4
+
+
+def _wavefront_kernel(seidel, grid, tail, max_radius_px, supersample) -> np.ndarray:
+    m, n_sub, N, R = grid
     U = pupil_function(seidel, N, R)
     A = np.fft.fftshift(np.fft.fft2(np.fft.ifftshift(U)))
     H = (A.real**2 + A.imag**2).reshape(n_sub, m, n_sub, m).sum(axis=(1, 3))
@@ -237,7 +263,8 @@ class SeidelPSF:
 
 
 def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, node_px: int = 64,
-               field_radius_px: float | None = None, tail: float = DEFAULT_TAIL) -> SmoothPSF:
+               field_radius_px: float | None = None, tail: float = DEFAULT_TAIL,
+               zero_centroid: bool = False) -> SmoothPSF:
     """A field-dependent wavefront PSF: coma and astigmatism point along the field radius
 
     SYNOPSIS
@@ -257,7 +284,8 @@ def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, node_px: in
     dependence is applied with h = |(x, y) - centre| / field_radius_px:
     tilt and coma scale with h, focus and astigmatism with h^2 (field
     curvature), spherical is constant; without it the amplitudes are constant
-    over the field. Kernels are cached per node.
+    over the field. Kernels are cached per node. zero_centroid: every
+    node's kernel has its light's centroid at its centre (wavefront_psf).
     """
     optics = Optics() if optics is None else optics
     cx, cy = (float(v) for v in centre)
@@ -275,7 +303,7 @@ def radial_psf(seidel: Seidel, centre, optics: Optics | None = None, node_px: in
     def kernel_at(x, y, s):
         key = (round(float(x), 3), round(float(y), 3), s)
         if key not in cache:
-            cache[key] = wavefront_psf(seidel_at(x, y), optics, s, tail)
+            cache[key] = wavefront_psf(seidel_at(x, y), optics, s, tail, zero_centroid=zero_centroid)
             while len(cache) > 256:
                 cache.popitem(last=False)
         return cache[key]
@@ -308,8 +336,10 @@ class LensPSF:
     curvature) and astigmatism with its square, spherical is constant; coma
     and astigmatism point along the field radius (radial_psf). Coma moves
     the light's centroid off the chief ray; unless `tilt` is given, an
-    equal and opposite tilt (tilt = -coma) puts it back, so the true camera
-    model is where the light's centroid lands (what make demo does).
+    equal and opposite tilt (tilt = -coma) puts it back, and every kernel's
+    centroid is put on the chief ray exactly (wavefront_psf's zero_centroid:
+    the crop of coma's tail would leave it 0.01-0.02 px off), so the true
+    camera model is where the light's centroid lands (what make demo does).
     """
 
     def __init__(self, seidel: Seidel, imagersize, optics: Optics | None = None, node_px: int = 64,
@@ -318,13 +348,15 @@ class LensPSF:
         self.imagersize = tuple(int(v) for v in imagersize)
         self.optics = Optics() if optics is None else optics
         self.node_px, self.tail = int(node_px), float(tail)
+        self.centred = tilt is None  # the light's centroid on the chief ray
         self._psf = None
 
     def _built(self) -> SmoothPSF:
         if self._psf is None:
             W, H = self.imagersize
             c = ((W - 1) / 2, (H - 1) / 2)
-            self._psf = radial_psf(self.seidel, c, self.optics, self.node_px, math.hypot(*c), self.tail)
+            self._psf = radial_psf(self.seidel, c, self.optics, self.node_px, math.hypot(*c), self.tail,
+                                   zero_centroid=self.centred)
         return self._psf
 
     def __getstate__(self):

@@ -125,6 +125,27 @@ def test_seidel_psf_plugs_into_the_renderer_interface():
     assert psf.describe()["kind"] == "seidel"
 
 
+@pytest.mark.parametrize("s", [2, 3, 4])
+@pytest.mark.parametrize("coma,angle", [(0.5, 0.3), (1.5, 2.0), (2.5, -1.0)])
+def test_zero_centroid_puts_the_light_on_the_chief_ray(coma, angle, s):
+    """tilt = -coma centres the whole PSF; the crop of coma's tail moves it 0.01-0.02 px, differently per s"""
+    seidel = Seidel(coma=coma, tilt=-coma, focus=0.2, coma_angle=angle, tilt_angle=angle)
+    assert np.hypot(*centroid_px(wavefront_psf(seidel, OPTICS, s), s)) > 0.002  # what the crop leaves
+    k = wavefront_psf(seidel, OPTICS, s, zero_centroid=True)
+    assert np.hypot(*centroid_px(k, s)) < 5e-4
+    assert np.allclose(second_moment_px(k, s), second_moment_px(wavefront_psf(seidel, OPTICS, s), s), rtol=0.02, atol=2e-3)
+
+
+def test_lens_psf_kernels_have_their_centroid_on_the_chief_ray():
+    from rotstar_mrcal.optics.psf import LensPSF
+
+    lens = LensPSF(Seidel(coma=1.5, focus=0.3), (1280, 800))
+    for x, y in ((1100.0, 650.0), (100.0, 90.0), (700.0, 450.0)):
+        for s in (2, 4):
+            assert np.hypot(*centroid_px(lens.local_kernel(x, y, s), s)) < 1e-3
+    assert not LensPSF(Seidel(coma=1.5), (1280, 800), tilt=0.0).centred  # a given tilt is the lens's own
+
+
 def test_radial_psf_points_coma_away_from_the_centre():
     """SmoothPSF with per-node orientation: the blurred dot's centroid moves radially outward"""
     s, tile = 4, 32
