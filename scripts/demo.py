@@ -63,7 +63,7 @@ from rotstar_lab.demo import capture, glass, plots, scene, sets  # noqa: E402
 from rotstar_lab.demo.scene import EXPOSURES, exposure_dir  # noqa: E402
 from rotstar_lab.docblock import rewrite_block  # noqa: E402
 from rotstar_lab.steps import log, run_step, short_path, start_clock, wall_time_note  # noqa: E402
-from rotstar_mrcal.peers.registry import method_names  # noqa: E402
+from rotstar_mrcal.peers.registry import Found, method_names, pooled  # noqa: E402
 from rotstar_mrcal.simulate.poses import centred_pose  # noqa: E402
 
 
@@ -105,6 +105,10 @@ def corner_sets(a, out: str) -> tuple[dict, dict]:
     for label, _ in scene.EXPOSURES:
         for g in rts:
             per = {m: [res[(g, i)].found[label][m][:2] for i in range(npose[g])] for m in methods + ["charuco"]}
+            for m in methods:  # a group is one dataset: psf-sim pools the coma over its poses, as rotstar-detect
+                got = pooled(m, layout, [Found(*res[(g, i)].found[label][m][:3], pose=res[(g, i)].found[label][m][3])
+                                         for i in range(npose[g])])
+                per[m] = [(f.corners, f.weights) for f in got]
             edir = scene.exposure_dir(out, label)
             for m, vnl in sets.write_group(edir, g, layout, model, rts[g], per, square, rts_sq[g]).items():
                 found.setdefault(label, {}).setdefault(m, {})[g] = vnl

@@ -393,3 +393,30 @@ def detect_pose(
         correction[labels[:, 1], labels[:, 0]] = q - q_sym
     return PoseCorners(corners, "", reasons, sigma, cov, grid_w, motion, shifts, found.unplaced, blur,
                        lowpass_sigma if refine.needs == "rotstar" else 0.0, samples, correction)
+
+
+def correct_with_dataset(layout: Layout, poses: list[PoseCorners], refine: Refiner) -> None:
+    """Every pose's corners corrected again by refine.correct with what refine.samples measured on ALL poses
+
+    (psf-sim: the coma is a property of the lens, measured where elements are
+    large; poses whose windows are all small get it from the others.) In
+    place; each pose's symmetric corners are its corners less its own
+    correction, its element Jacobians those of its corners' homography.
+    detect_camera's first pass leaves the corrections to this (corners_as_they_are).
+    """
+    have = [p for p in poses if p.samples is not None and p.correction is not None]
+    if not have:
+        return
+    pooled = tuple(np.concatenate([p.samples[i] for p in have]) for i in (0, 1))
+    angles = np.array([layout.angle(k) for k in range(layout.nframes)])
+    for p in have:
+        j, i = np.nonzero(np.isfinite(p.corners[..., 0]) & np.isfinite(p.correction[..., 0]))
+        if len(i) < 4:
+            continue
+        labels = np.column_stack((i, j))
+        q = p.corners[j, i] - p.correction[j, i]
+        jac = label_jacobian(q, labels, labels, layout.pitch)
+        new = refine.correct(None, q, p.window[j, i], None, samples=pooled, jac=jac, angles=angles,
+                             lowpass_sigma=p.prefilter_px)
+        p.corners[j, i] = new
+        p.correction[j, i] = new - q

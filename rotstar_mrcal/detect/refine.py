@@ -381,7 +381,7 @@ class Refiner:
     # display offsets (K, N, 2) or None) -> (N, 2), applied by detect_pose after its symmetric refinement
     samples: Callable | None = None  # with correct: (the same arguments) -> what the correction measured on the
     # pose (psf-sim: the corners' coma, psfbias.coma_samples), handed back as correct(..., samples=); a dataset
-    # pools them over its poses and corrects every pose again with the pool (run.correct_with_dataset)
+    # pools them over its poses and corrects every pose again with the pool (pipeline.correct_with_dataset)
 
 
 def refine_symmetric(frames, starts, window=10.0) -> np.ndarray:

@@ -73,7 +73,7 @@ from rotstar_mrcal.vnl import mrcal_can_read, mrcal_keeps
 from rotstar_mrcal.detect.display_offsets import (
     MAX_MOTION, DisplayCheck, FrameShifts, map_displacement, still_display,
 )
-from rotstar_mrcal.detect.pipeline import PoseCorners, detect_pose, label_jacobian, refine_with_maps
+from rotstar_mrcal.detect.pipeline import PoseCorners, correct_with_dataset, detect_pose, refine_with_maps
 from rotstar_mrcal.detect.refine import SYMMETRIC, Refiner
 from rotstar_mrcal.detect.rig import MAX_TURN_DEG, check_labelling
 
@@ -247,33 +247,6 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
 def corners_as_they_are(frames, corners, window, shifts, samples=None) -> np.ndarray:
     """A Refiner's correct that changes nothing (detect_camera's first pass of a pooling refiner)"""
     return corners
-
-
-def correct_with_dataset(layout: Layout, poses: list[PoseCorners], refine: Refiner) -> None:
-    """Every pose's corners corrected again by refine.correct with what refine.samples measured on ALL poses
-
-    (psf-sim: the coma is a property of the lens, measured where elements are
-    large; poses whose windows are all small get it from the others.) In
-    place; each pose's symmetric corners are its corners less its own
-    correction, its element Jacobians those of its corners' homography.
-    detect_camera's first pass leaves the corrections to this (corners_as_they_are).
-    """
-    have = [p for p in poses if p.samples is not None and p.correction is not None]
-    if not have:
-        return
-    pooled = tuple(np.concatenate([p.samples[i] for p in have]) for i in (0, 1))
-    angles = np.array([layout.angle(k) for k in range(layout.nframes)])
-    for p in have:
-        j, i = np.nonzero(np.isfinite(p.corners[..., 0]) & np.isfinite(p.correction[..., 0]))
-        if len(i) < 4:
-            continue
-        labels = np.column_stack((i, j))
-        q = p.corners[j, i] - p.correction[j, i]
-        jac = label_jacobian(q, labels, labels, layout.pitch)
-        new = refine.correct(None, q, p.window[j, i], None, samples=pooled, jac=jac, angles=angles,
-                             lowpass_sigma=p.prefilter_px)
-        p.corners[j, i] = new
-        p.correction[j, i] = new - q
 
 
 REFINE_AGAIN_PX = 0.002  # a pose is refined again when the dataset's maps move a frame's corner this much more

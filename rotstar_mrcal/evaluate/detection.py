@@ -8,7 +8,8 @@ SYNOPSIS
     split_interleaved("cal/corners.vnl", "A.vnl", "B.vnl")   # boards 0, 2, 4, ... / 1, 3, 5, ...
 
 detect_dataset runs cornersets.detect_methods on every pose of a dataset
-(in `jobs` processes) and writes one corners.vnl per method,
+(in `jobs` processes) and writes one corners.vnl per method (a method that
+pools a dataset, psf-sim, as rotstar-detect does: registry.pooled),
 outdir/<method>/<side>.vnl; rotstar's methods name the first rotating-star
 frame of each pose, the checkerboard ones the checkerboard frame.
 
@@ -26,7 +27,7 @@ import os
 from rotstar_mrcal import dataset
 from rotstar_mrcal.atomic import atomic_write
 from rotstar_mrcal.detect.display_offsets import MAX_MOTION, dataset_offsets
-from rotstar_mrcal.peers.registry import Found
+from rotstar_mrcal.peers.registry import Found, pooled
 from rotstar_mrcal.parallel import process_map
 from rotstar_mrcal.vnl import write_corners
 from rotstar_mrcal.peers.cornersets import detect_methods
@@ -79,10 +80,10 @@ def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1, pro
     out = {}
     for m in methods:
         boards, weights = [], []
-        for p in poses:
-            _, rfile, cbfile, found = res[p]
-            boards.append((rfile if m.startswith("rotstar") else cbfile, found[m].corners))
-            weights.append(found[m].weights)
+        for p, f in zip(poses, pooled(m, layout, [res[p][3][m] for p in poses])):  # psf-sim: the dataset's coma
+            _, rfile, cbfile, _ = res[p]
+            boards.append((rfile if m.startswith("rotstar") else cbfile, f.corners))
+            weights.append(f.weights)
         path = os.path.join(outdir, m, f"{side}.vnl")
         os.makedirs(os.path.dirname(path), exist_ok=True)
         with atomic_write(path) as f:

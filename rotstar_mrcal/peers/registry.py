@@ -53,7 +53,7 @@ from typing import Callable
 import numpy as np
 
 from rotstar_mrcal.pattern.layout import Layout
-from rotstar_mrcal.detect.pipeline import detect_pose
+from rotstar_mrcal.detect.pipeline import correct_with_dataset, detect_pose
 from rotstar_mrcal.detect.edgespread import psf_correct
 from rotstar_mrcal.detect.psfbias import bias_correct, coma_samples
 from rotstar_mrcal.detect.refine import (PREFILTER_SIGMA, SYMMETRIC, Refiner, lowpass_for, prefilter,
@@ -165,6 +165,7 @@ class Found:
     why: str = ""  # why there is no board
     shifts: object = None  # rotstar's detect.display.FrameShifts of the pose (the dataset's motion check)
     reasons: np.ndarray | None = None  # (ny, nx) str: why a corner is NaN ('' where found), when the method says
+    pose: object = None  # rotstar's detect.pipeline.PoseCorners, for a method whose refiner pools a dataset (pooled)
 
 
 def rotstar_detection(p: PoseImages):
@@ -185,7 +186,8 @@ def _rotstar_refined(refine: Refiner):
     def run(p: PoseImages) -> Found:
         r = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale, window=p.window,
                         identity=p.identity, refine=refine)
-        return Found(r.corners if r.found else None, None, r.error, r.shifts)
+        pooled = refine.samples is not None and r.found
+        return Found(r.corners if r.found else None, None, r.error, r.shifts, pose=r if pooled else None)
     return run
 
 
@@ -293,6 +295,7 @@ class Method:
     variant_of: str = ""  # gives the corners of that method (with weights)
     detail: str = ""  # settings worth a word in a table
     demo: bool = True  # part of make demo's comparison
+    refiner: Refiner | None = None  # rotstar's refiner in place of the symmetric fit (its run: _rotstar_refined)
 
     @property
     def peer(self) -> bool:
@@ -339,11 +342,11 @@ METHODS = {m.name: m for m in (
            relabel=True, demo=False),
     Method("rotstar-psf", "rotstar, PSF-aware (centroid of the light)", "rotstar", "own",
            "rotating-star frames, the symmetric fit moved to where the edges' line-spread means meet "
-           "(rotstar-detect --refine psf)", _rotstar_refined(PSF), demo=False),
+           "(rotstar-detect --refine psf)", _rotstar_refined(PSF), demo=False, refiner=PSF),
     Method("rotstar-psf-sim", "rotstar, less the bias simulated through the local PSF", "rotstar", "own",
            "rotating-star frames, the symmetric fit less its offset from the light's centroid, simulated on the "
-           "local star through the coma the edges show (rotstar-detect --refine psf-sim)", _rotstar_refined(PSF_SIM),
-           demo=False),
+           "local star through the coma the edges show, pooled over a dataset's poses (rotstar-detect --refine psf-sim)",
+           _rotstar_refined(PSF_SIM), refiner=PSF_SIM),
 )}
 
 
@@ -357,6 +360,27 @@ def method_names(needs=None, start=None, demo=None, variants: bool = True) -> li
     return [n for n, m in METHODS.items()
             if (needs is None or m.needs in needs) and (start is None or m.start == start)
             and (demo is None or m.demo == demo) and (variants or not m.variant_of)]
+
+
+def pooled(name: str, layout: Layout, found: list[Found]) -> list[Found]:
+    """One method's Found on every pose of a dataset, as rotstar-detect gives them on that dataset
+
+    A method whose refiner pools its measurements over the poses (psf-sim:
+    the lens's coma) corrects every pose again with the pool
+    (pipeline.correct_with_dataset); any other method's are returned as they
+    are. The benchmark's and the demo's per-pose runs of such a method are
+    its single-pose form; a caller with a dataset's poses passes them here.
+
+    >>> pooled("saddle", None, [Found(None)])[0].why
+    ''
+    """
+    refine = METHODS[name].refiner if name in METHODS else None
+    if refine is None or refine.samples is None:
+        return found
+    poses = [f.pose for f in found if f.pose is not None and f.corners is not None]
+    correct_with_dataset(layout, poses, refine)  # in place: each Found's pose holds its corners
+    return [dataclasses.replace(f, corners=f.pose.corners) if f.pose is not None and f.corners is not None else f
+            for f in found]
 
 
 def method(name: str) -> Method:

@@ -1,5 +1,7 @@
 """Bias by simulation (detect/psfbias.py): the symmetric fit's offset under coma, found and taken off"""
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -8,10 +10,10 @@ from rotstar_mrcal.detect.pipeline import PoseCorners
 from rotstar_mrcal.detect.psfbias import (bias_correct, coma_samples, render_star, render_star_fft, seidel_kernel,
                                          simulated_bias, star_normals)
 from rotstar_mrcal.detect.refine import lowpass_for, prefilter, symmetric_refine
-from rotstar_mrcal.detect.run import correct_with_dataset
+from rotstar_mrcal.detect.pipeline import correct_with_dataset
 from rotstar_mrcal.optics.psf import centroid_px, gaussian_psf
 from rotstar_mrcal.pattern.layout import make_layout
-from rotstar_mrcal.peers.registry import REFINERS
+from rotstar_mrcal.peers.registry import REFINERS, Found, pooled
 
 ANGLES = np.arange(8) * np.pi / 16
 
@@ -73,7 +75,7 @@ def test_the_binned_rendering_is_the_fft_one(monkeypatch):
 
 
 def test_a_dataset_lends_its_coma_to_a_pose_that_shows_none():
-    """run.correct_with_dataset: the pooled coma corrects a pose whose own edges measured nothing"""
+    """pipeline.correct_with_dataset (and registry.pooled): the pooled coma corrects a pose whose own edges measured nothing"""
     frames, truth = star_mosaic(seidel_kernel(1.5, 0.0, np.radians(30)), np.array([[1.0, 0.2], [0.1, 0.9]]))
     w = np.full(len(truth), 6.0)
     q = symmetric_refine(prefilter(frames, lowpass_for(w)), truth + 0.2, w).corners
@@ -84,12 +86,17 @@ def test_a_dataset_lends_its_coma_to_a_pose_that_shows_none():
                            samples=samples, correction=np.zeros((4, 4, 2)))
 
     seen, blind = pose(coma_samples(frames, q, w)), pose((np.zeros((0, 2)), np.zeros((0, 2))))
-    correct_with_dataset(layout, [seen, blind], REFINERS["psf-sim"])
     e0 = np.sqrt(((q - truth) ** 2).sum(1).mean())
-    for p in (seen, blind):
+    # registry.pooled (the demo's and rotstar-crossval's path) on copies; then the same poses here
+    found = [Found(p.corners.copy(), pose=copy.deepcopy(p)) for p in (seen, blind)] + [Found(None, why="no board")]
+    got = pooled("rotstar-psf-sim", layout, found)
+    correct_with_dataset(layout, [seen, blind], REFINERS["psf-sim"])
+    for p, f in zip((seen, blind), got):
         e = p.corners.reshape(-1, 2) - truth
         assert np.sqrt((e ** 2).sum(1).mean()) < 0.25 * e0
         assert np.allclose(p.correction.reshape(-1, 2), p.corners.reshape(-1, 2) - q)
+        assert np.array_equal(f.corners, p.corners)
+    assert got[2].corners is None and pooled("rotstar", layout, found) is found  # a method that does not pool
 
 
 @pytest.mark.slow  # psfbias.PHASE is off by default (doc/blur-map.md); make test keeps bias_correct's default path

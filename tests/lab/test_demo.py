@@ -76,16 +76,18 @@ def test_capture_pose_uses_every_frame_of_the_sequence(tmp_path):
     rt = simulate.random_poses(model, layout, 1, np.random.default_rng(0))[0]
     capture.init_worker(layout, square, (model.intrinsics(), model.imagersize()), simulate.camera_rays(model))
     try:
-        r = capture.capture_pose(capture.Job("A", 0, rt, rt, 1, str(tmp_path), True, ("rotstar", "saddle")))
+        r = capture.capture_pose(capture.Job("A", 0, rt, rt, 1, str(tmp_path), True,
+                                             ("rotstar", "saddle", "rotstar-psf-sim")))
     finally:
         capture._W.clear()
     emitting = simulate.true_corners(model, layout, rt)
     truth = seen_through_the_glass(model, layout, rt)
     assert np.abs(truth - emitting).max() > 0.3  # the demo's screen is under glass: this pose sees it
     for label, found in r.found.items():
-        for m, (corners, _, why) in found.items():
+        for m, (corners, _, why, pose) in found.items():
             assert corners is not None, (label, m, why)
             assert np.abs(corners - truth).max() < 0.2, (label, m)
+            assert (pose is not None) == (m == "rotstar-psf-sim")  # what demo.corner_sets pools over a group
     pose = tmp_path / scene.exposure_dir("", scene.EXPOSURES[0][0]) / "A" / "pose000"
     assert sorted(os.listdir(pose)) == sorted(f["file"] for f in layout.frames())
     dataset.write_pattern(str(pose.parent), layout)
@@ -112,7 +114,7 @@ def test_capture_pose_with_the_paper_sequence(tmp_path):
     truth = seen_through_the_glass(model, layout, rt)
     for label, found in r.found.items():
         for m in ("rotstar", "phase-keep", "star") + (("phase",) if "saturated" not in label else ()):
-            corners, _, why = found[m]
+            corners, _, why, _ = found[m]
             assert corners is not None, (label, m, why)
             d = np.linalg.norm(corners - truth, axis=-1)
             # near the truth: a wrong board is MATCH_PX = 3 px off. The star's one noisy frame in rotstar's windows

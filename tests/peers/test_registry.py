@@ -43,7 +43,7 @@ def test_registry_entries_are_well_formed():
 def test_selections_keep_the_experiments_methods():
     # the demo's comparison and the benchmark's rows, as before the registry
     assert method_names(needs=("rotstar", "checkerboard"), demo=True) == [
-        "rotstar", "rotstar-weighted", "opencv-sb", "cornersubpix", "saddle"]
+        "rotstar", "rotstar-weighted", "opencv-sb", "cornersubpix", "saddle", "rotstar-psf-sim"]
     assert method_names(needs="square", demo=True) == ["mrgingham"]
     assert method_names(variants=False) == ["rotstar", "opencv-sb", "opencv-classic", "cornersubpix", "saddle",
                                             "phase", "phase-keep", "star", "mrgingham", "mrgingham-noclahe",

@@ -3,7 +3,8 @@
 SYNOPSIS
 
     results = capture_all(jobs, layout, square, model, rts, rts_square, seed, out, keep_images, methods, log)
-    results[("A", 0)].found["4000 us"]["saddle"]     # (corners or None, weights or None, why)
+    results[("A", 0)].found["4000 us"]["saddle"]     # (corners or None, weights or None, why, None)
+    results[("A", 0)].found["4000 us"]["rotstar-psf-sim"][3]   # its PoseCorners (registry.pooled pools a group)
     results[("A", 0)].found["4000 us"]["charuco"]    # OpenCV's ChArUco detector (charuco=True)
     results[("A", 0)].rejected["4000 us"]["phase"]   # (ny, nx) why each phase corner is missing ('' = found)
     results[("B", 0)].crops                          # close-ups of one corner, per exposure
@@ -117,7 +118,7 @@ def capture_pose(job: Job) -> PoseResult:
         Est = E[np.flatnonzero(kinds == "star")[0]] if layout.star_segments else None
         star = averaged_captures(Est, expose, CAPTURES, roi=lit_box(Est)) if layout.star_segments else None
         found = detect_methods(rot, layout, 65535.0, cb, job.methods, identity=ident, phase=phase, star=star)
-        results[label] = {m: (f.corners, f.weights, f.why) for m, f in found.items()}
+        results[label] = {m: (f.corners, f.weights, f.why, f.pose) for m, f in found.items()}
         rejected[label] = {m: f.reasons for m, f in found.items() if f.reasons is not None}
         if job.charuco:
             c = detect_charuco(ch, layout, 65535.0)

@@ -119,7 +119,7 @@ def coma_psf(imagersize):
     W, H = imagersize
     centre = ((W - 1) / 2, (H - 1) / 2)
     return radial_psf(Seidel(coma=COMA_WAVES, tilt=-COMA_WAVES, focus=FOCUS_WAVES), centre, Optics(),
-                      node_px=64, field_radius_px=math.hypot(*centre))
+                      node_px=64, field_radius_px=math.hypot(*centre), zero_centroid=True)
 
 
 def setup_notes(npose, reach) -> str:
@@ -147,7 +147,9 @@ to 60 degrees (the paper: 10-degree steps), at three places in the field of view
 90% of its corners lie within {reach['B']:.0f} px of the image centre, against {reach['A']:.0f} px for A.
 Three exposures (gains 0.35, 0.7 and 1.4 of full scale for white; the last saturates the white).
 Each method detects its own corners on the same poses: rotstar on the 8 rotating-star frames and the 13
-identity frames (one capture each); phase shifting on the 8 phase-shift frames (one capture each), from
+identity frames (one capture each); rotstar-psf-sim the same, less the symmetric fit's offset from the
+light's centroid simulated through the coma its edges show, pooled over the group's poses as
+`rotstar-detect --refine psf-sim` pools a dataset's (doc/blur-map.md); phase shifting on the 8 phase-shift frames (one capture each), from
 rotstar's corners (`phase` rejects a corner whose window holds a clipped value, `phase-keep` fits the
 clipped values as the paper's pipeline does); the star (the symmetric refinement on the one star frame,
 from rotstar's corners) and the checkerboard methods on their frame averaged over 8 captures (the same
