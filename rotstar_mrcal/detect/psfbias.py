@@ -39,6 +39,7 @@ import numpy as np
 
 from rotstar_mrcal.detect.edgespread import (BIN_PX, MAX_REACH, MIN_REACH, REACH_PER_WINDOW, edge_spread, local_psf,
                                              smooth_field)
+from rotstar_mrcal.detect import coma_tables
 from rotstar_mrcal.detect.refine import lowpass_for, prefilter, symmetric_refine
 from rotstar_mrcal.optics.psf import Optics, wavefront_psf
 from rotstar_mrcal.optics.wavefront import Seidel
@@ -310,11 +311,25 @@ def _seidel_kernel(coma, focus, angle_deg, optics, s):
 TABLE_COMA = np.arange(0.0, 4.01, 0.25)  # waves of local coma in the table of measured third moments
 
 
-@functools.lru_cache(maxsize=64)
 def coma_table(reach: float, optics) -> np.ndarray:
     """(len(TABLE_COMA),) the third moment edgespread measures (A, px^3) on the local star through each coma
 
-    The star (square pixels, window reach / REACH_PER_WINDOW) rendered
+    For the default Optics at the reaches edgespread uses (MIN_REACH to
+    MAX_REACH in BIN_PX steps) the table is read from detect/coma_tables.py
+    (written by scripts/coma_tables.py; computing one takes 0.3 s of a
+    process's first pose at that reach, 2.4 s of an 8-pose dataset);
+    otherwise computed_coma_table.
+    """
+    if optics == Optics():
+        shipped = coma_tables.TABLES.get(round(float(reach), 6))
+        if shipped is not None and len(shipped) == len(TABLE_COMA):
+            return np.array(shipped)
+    return computed_coma_table(reach, optics)
+
+
+@functools.lru_cache(maxsize=64)
+def computed_coma_table(reach: float, optics) -> np.ndarray:
+    """coma_table computed: the star (square pixels, window reach / REACH_PER_WINDOW) rendered
     through seidel_kernel(coma, 0, 0) and read by local_psf with this
     reach, as the real corners are: the table carries what the ESF reading
     does to the moments (the tail beyond the reach, the levels it is
@@ -407,6 +422,7 @@ def spread_nodes(xy: np.ndarray, n: int) -> np.ndarray:
 NODES = 12  # corners per pose where the bias is simulated; a smooth field carries it to the others
 DEGREE = 2  # of that field
 PHASE = False  # bias_correct: every corner's own sub-pixel phase and window simulated on its node's star
+PHASE_ANGLE_STEP = math.radians(5.0)  # ... through a kernel at its coma's angle rounded to this
 # (doc/blur-map.md: better at coma 1.5, not at 2.5, so not the default)
 COMA_SIGNIFICANCE = 3.0  # a pooled coma below this many standard deviations of its plane is taken as 0
 
@@ -516,9 +532,13 @@ def _phase_correct(q, idx, nd, w, c, a, normals, sigma, degree, optics) -> np.nd
     """bias_correct (phase): every corner on its node's star at its own window and at the sub-pixel phase of where
     its light's centroid is, plus the change from its node to it of the smooth field of the nodes' biases at
     phase 0 (the bias is smooth over the image at a fixed phase, not from corner to corner at theirs)"""
-    kern = _padded([seidel_kernel(ci, 0.0, ai, optics) for ci, ai in zip(c, a)])  # (not turned: the pixels do not)
+    # the node's kernel at its coma's angle rounded to PHASE_ANGLE_STEP (kernels cached), the pattern turned by
+    # the rest (at most half a step: turning it by the whole angle turns the pixel grid against it too)
+    aq = np.round(a / PHASE_ANGLE_STEP) * PHASE_ANGLE_STEP
+    kern = _padded([seidel_kernel(ci, 0.0, ai, optics) for ci, ai in zip(c, aq)])
+    normals = _turned(normals, aq - a)
     light = star_light(kern, SUPERSAMPLE, normals)
-    b0 = simulated_bias(kern, SUPERSAMPLE, normals, np.round(q[nd]), w[nd], sigma, light=light)
+    b0 = _turned(simulated_bias(kern, SUPERSAMPLE, normals, np.round(q[nd]), w[nd], sigma, light=light), a - aq)
     b0[c == 0] = 0.0  # (the sharp diffraction kernel's own small offsets from the pixel grid are not the lens's)
     ok = np.isfinite(b0).all(axis=1)
     out = q.copy()
@@ -528,7 +548,8 @@ def _phase_correct(q, idx, nd, w, c, a, normals, sigma, degree, optics) -> np.nd
     near = np.argmin(np.linalg.norm(q[idx, None] - q[nd][None], axis=2), axis=1)  # each corner's node
     near[np.searchsorted(idx, nd)] = np.arange(len(nd))  # (a node is its own)
     guess = field[:len(idx)]
-    own = simulated_bias(kern, SUPERSAMPLE, normals, q[idx] - guess, w[idx], sigma, source=near, light=light)
+    own = _turned(simulated_bias(kern, SUPERSAMPLE, normals, q[idx] - guess, w[idx], sigma, source=near,
+                                 light=light), (a - aq)[near])
     own[c[near] == 0] = 0.0
     step = own + guess - field[len(idx):][near]
     out[idx] -= np.where(np.isfinite(step).all(axis=1)[:, None], step, guess)

@@ -116,3 +116,14 @@ def test_each_corner_s_sub_pixel_phase_is_simulated(monkeypatch):
     new = bias_correct(frames, q, w, phase=True, **opts) - truth
     rms_old, rms_new = (float(np.sqrt((e ** 2).sum(1).mean())) for e in (old, new))
     assert rms_old > 0.001 and rms_new < 0.5 * rms_old, (rms_old, rms_new)
+
+
+@pytest.mark.parametrize("reach", [2.0, 3.25])
+def test_the_shipped_coma_tables_are_what_the_code_computes(reach):
+    """detect/coma_tables.py (scripts/coma_tables.py) is stale once the moments' reading or the kernels change"""
+    from rotstar_mrcal.detect import coma_tables
+    from rotstar_mrcal.optics.psf import Optics
+
+    assert reach in coma_tables.TABLES
+    assert np.allclose(psfbias.coma_table(reach, Optics()), psfbias.computed_coma_table(reach, Optics()),
+                       rtol=1e-9, atol=1e-12), "run scripts/coma_tables.py"
