@@ -36,7 +36,9 @@ simbias-est (psf-sim's estimate with the true geometry), simbias-truecoma
 simbias-seidel (every corner simulated through the Seidel PSF at that point,
 the lens's coma and focus: LensPSF without the blending between its
 nodes). --noise 0 renders
-noiseless frames, --no-display-maps leaves the per-frame display maps out.
+noiseless frames, --no-display-maps leaves the per-frame display maps out;
+--supersample S renders at S sub-pixels per px (make demo's 2; default 4)
+and --pose K runs only pose K of the --npose.
 The floor's suspects (doc/blur-map.md): --tiled PX renders through the
 former piecewise-constant PSF (optics.TiledPSF, PX-px tiles from the rendered
 region's corner; simbias-true then takes the Seidel kernel at the corner),
@@ -80,7 +82,7 @@ from rotstar_lab.benchmark.scoring import MATCH_PX, perturbed_start
 CELL_PX = 80.0
 
 
-def render(model, layout, rt, psf, path):
+def render(model, layout, rt, psf, path, supersample=4):
     """(rotstar frames irradiance (8, H, W), checkerboard irradiance (H, W)), cached in path"""
     if os.path.exists(path):
         z = np.load(path)
@@ -89,7 +91,7 @@ def render(model, layout, rt, psf, path):
     kinds = np.array([f["kind"] for f in fr])
     light = simulate.shown_light(simulate.exact_frames(layout, fr), 2.2, 2.2)
     screen = simulate.make_screen(light, layout)
-    E = simulate.render_irradiance(screen, model, rt, supersample=4, psf=psf)
+    E = simulate.render_irradiance(screen, model, rt, supersample=supersample, psf=psf)
     rot, cb = E[kinds == "rotstar"], E[kinds == "checkerboard"][0]
     np.savez(path, rot=rot, cb=cb)
     return rot, cb
@@ -373,6 +375,9 @@ def main(argv=None):
     p.add_argument("--focus", type=float, default=0.3)
     p.add_argument("--gaussian", type=float, default=0.0)
     p.add_argument("--npose", type=int, default=4)
+    p.add_argument("--pose", type=int, default=None, help="only pose K of the --npose (e.g. for --supersample)")
+    p.add_argument("--supersample", type=int, default=4,
+                   help="sub-pixels per px of the renders (default 4; make demo renders at 2)")
     p.add_argument("--noise", type=float, default=1.0,
                    help="scale of the read noise (1 %%) and shot noise (1e-4); 0: noiseless frames, whose "
                         "pose-dependent error is the methods' own")
@@ -422,9 +427,13 @@ def main(argv=None):
     mc = not a.no_display_maps
     acc = {m: ([], [], [], []) for m in methods}  # positions, errors, seconds, true windows
     later = []  # psf-sim-dataset's poses
+    if a.supersample != 4:
+        tag += f"-ss{a.supersample}"
     for i, rt in enumerate(rts):
+        if a.pose is not None and i != a.pose:
+            continue
         t0 = time.perf_counter()
-        rot, cb = render(model, layout, rt, psf, os.path.join(a.cache, f"{tag}-s{a.seed}-p{i}.npz"))
+        rot, cb = render(model, layout, rt, psf, os.path.join(a.cache, f"{tag}-s{a.seed}-p{i}.npz"), a.supersample)
         print(f"pose {i}: rendered ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
         truth = simulate.true_corners(model, layout, rt)
         view = in_view(model, layout, rt)
