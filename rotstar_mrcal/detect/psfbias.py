@@ -423,7 +423,8 @@ NODES = 12  # corners per pose where the bias is simulated; a smooth field carri
 DEGREE = 2  # of that field
 PHASE = False  # bias_correct: every corner's own sub-pixel phase and window simulated on its node's star
 PHASE_ANGLE_STEP = math.radians(5.0)  # ... through a kernel at its coma's angle rounded to this
-# (doc/blur-map.md: better at coma 1.5, not at 2.5, so not the default)
+# (doc/blur-map.md: on 10 near poses it takes the pooled pose-dependent part from 0.64 x to 0.41 x of the
+# symmetric fit's at coma 1.5, but a whole rotstar-detect run costs about 2 x, so it is not the default)
 COMA_SIGNIFICANCE = 3.0  # a pooled coma below this many standard deviations of its plane is taken as 0
 
 

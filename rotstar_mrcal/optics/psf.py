@@ -122,8 +122,9 @@ def wavefront_psf(seidel: Seidel, optics: Optics | None = None, supersample: int
     differently at each supersampling.
     """
     optics = Optics() if optics is None else optics
-    grid = _psf_grid(seidel, optics, supersample)  # (kept for the added tilt: a grid that changed with it would
-    k = _wavefront_kernel(seidel, grid, tail, max_radius_px, supersample)  # make the centroid jump)
+    # (the grid is kept for the added tilt: a grid that changed with it would make the centroid jump)
+    grid = _psf_grid(seidel, optics, supersample)
+    k = _wavefront_kernel(seidel, grid, tail, max_radius_px, supersample)
     if zero_centroid:
         t = seidel.tilt * np.array((math.cos(seidel.tilt_angle), math.sin(seidel.tilt_angle)))
         for _ in range(ZERO_CENTROID_STEPS):

@@ -400,7 +400,8 @@ def main(argv=None):
     p.add_argument("--check-blur-map", metavar="CSV", help="compare a blur map with the lens's true PSFs")
     p.add_argument("--timing", action="store_true",
                    help="also the CPU time of detect_pose per pose, symmetric, psf and psf-sim "
-                        "(the least of 3 runs each)")
+                        "(the least of 3 runs each: psf-sim's kernels and tables are cached by then; "
+                        "time a whole rotstar-detect run for what a user waits)")
     a = p.parse_args(argv)
     if a.check_blur_map:
         return check_blur_map(a.check_blur_map, a.coma, a.focus)
