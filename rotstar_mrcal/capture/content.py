@@ -355,6 +355,15 @@ def class_levels(X: np.ndarray, visits: list[Visit], n_classes: int) -> np.ndarr
     return level_of / np.maximum(count, 1)
 
 
+def unseen(loop: list[dict], by_entry: dict[int, int]) -> list[str]:
+    """The files of the loop's entries (the marker left out) that no class was assigned to, in the loop's order
+
+    >>> unseen([{"file": "m"}, {"file": "a"}, {"file": "b"}], {0: 3, 2: 1})
+    ['a']
+    """
+    return [loop[e]["file"] for e in range(1, len(loop)) if e not in by_entry]
+
+
 def assign_entries(visits: list[Visit], X: np.ndarray, n_classes: int, t: np.ndarray, loop: list[dict], layout: Layout,
                    opts: Options, seconds: bool, durations) -> tuple[dict[int, int], float]:
     """Step 4 and 6 of the module doc: {entry: class} for every loop entry but the marker, and the correlation"""
@@ -369,7 +378,7 @@ def assign_entries(visits: list[Visit], X: np.ndarray, n_classes: int, t: np.nda
     for v in visits:
         v.entry = cmap.get(v.cls, -1)
     by_entry = {e: c for c, e in cmap.items()}
-    missing = [loop[e]["file"] for e in range(1, len(loop)) if e not in by_entry]
+    missing = unseen(loop, by_entry)
     if missing and (not opts.content_spare or unspared(loop[1:], missing)):
         raise SegmentError(f"{len(missing)} frame(s) of pattern.json not seen clean: {', '.join(missing)} (record "
                            f"longer, or hold the player's frames longer)")
@@ -458,9 +467,9 @@ def content_segmentation(frames, X: np.ndarray, visits: list[Visit], by_entry: d
     # the difference signal and threshold of segment_loops, for plots and rotstar-capture --auto (not for the split)
     dmask = screen_pixels(frames, full_scale, opts.step)
     d, level = difference_signal(frames, full_scale, opts.step, dmask)
-    missing = [loop[e]["file"] for e in range(1, len(loop)) if e not in by_entry]
     return Segmentation(images, ranges, stretches, np.array([v.entry == 0 for v in visits]), [verdict], 0, d, level,
-                        threshold(d, opts.k, opts.ratio), dmask, method="content", used=used, missing=missing)
+                        threshold(d, opts.k, opts.ratio), dmask, method="content", used=used,
+                        missing=unseen(loop, by_entry))
 
 
 def segment_content(frames, frames_list: list[dict], layout: Layout, full_scale: float, opts: Options = Options(),
