@@ -120,10 +120,13 @@ def test_each_corner_s_sub_pixel_phase_is_simulated(monkeypatch):
 
 @pytest.mark.parametrize("reach", [2.0, 3.25])
 def test_the_shipped_coma_tables_are_what_the_code_computes(reach):
-    """detect/coma_tables.py (scripts/coma_tables.py) is stale once the moments' reading or the kernels change"""
+    """detect/coma_tables.py (scripts/coma_tables.py) is stale once the moments' reading or the kernels change
+
+    (to 1e-5 of the table's range: FFTs on another machine move the last digits by some 1e-6 relative)"""
     from rotstar_mrcal.detect import coma_tables
     from rotstar_mrcal.optics.psf import Optics
 
     assert reach in coma_tables.TABLES
-    assert np.allclose(psfbias.coma_table(reach, Optics()), psfbias.computed_coma_table(reach, Optics()),
-                       rtol=1e-9, atol=1e-12), "run scripts/coma_tables.py"
+    want = psfbias.computed_coma_table(reach, Optics())
+    assert np.allclose(psfbias.coma_table(reach, Optics()), want, rtol=0, atol=1e-5 * float(np.ptp(want))), \
+        "run scripts/coma_tables.py"
