@@ -109,12 +109,14 @@ def _patches(frames, corners, half, shifts):
     px = ic[..., 0, None] + ox.ravel()
     py = ic[..., 1, None] + oy.ravel()
     inside = (px >= 0) & (px < W) & (py >= 0) & (py < H)
-    k = np.arange(K)[None, :, None]
     x, y = np.clip(px, 0, W - 1), np.clip(py, 0, H - 1)
-    v = frames[k, y, x]
+    flat = np.ascontiguousarray(frames).reshape(-1)
+    row = np.arange(K)[None, :, None] * (H * W) + y * W  # (np.take on the flat frames: fancy indexing's result,
+    v = np.take(flat, row + x)  # at a fraction of its time)
     xl, xr, yu, yd = np.maximum(x - 1, 0), np.minimum(x + 1, W - 1), np.maximum(y - 1, 0), np.minimum(y + 1, H - 1)
-    gx = (frames[k, y, xr] - frames[k, y, xl]) / np.maximum(xr - xl, 1)
-    gy = (frames[k, yd, x] - frames[k, yu, x]) / np.maximum(yd - yu, 1)
+    gx = (np.take(flat, row + xr) - np.take(flat, row + xl)) / np.maximum(xr - xl, 1)
+    col = np.arange(K)[None, :, None] * (H * W) + x
+    gy = (np.take(flat, col + yd * W) - np.take(flat, col + yu * W)) / np.maximum(yd - yu, 1)
     d = np.stack((px - c[..., 0, None], py - c[..., 1, None]), axis=-1)
     return v, gx, gy, d, inside
 
@@ -234,8 +236,19 @@ def edge_spread(frames, corners, window, shifts=None, reach=None) -> EdgeSpread:
     if not good.any():
         return out
     q, w, L = q[good], w[good], L[good]
-    half = int(np.ceil(w.max()))
-    v, gx, gy, d, inside = _patches(frames, q, half, None if shifts is None else np.asarray(shifts)[:, good])
+    sh = None if shifts is None else np.asarray(shifts)[:, good]
+    idx = np.flatnonzero(good)
+    size = np.ceil(w).astype(int)
+    for g in np.unique(size):  # each size of window on patches of its own size (not all on the largest's)
+        m = size == g
+        _edge_spread_group(out, idx[m], frames, q[m], w[m], L[m], None if sh is None else sh[:, m], int(g))
+    return out
+
+
+def _edge_spread_group(out, idx, frames, q, w, L, shifts, half):
+    """edge_spread of corners q (n, 2) whose windows fit half, into out's rows idx"""
+    K = len(frames)
+    v, gx, gy, d, inside = _patches(frames, q, half, shifts)
     z2 = (gx + 1j * gy) ** 2
     sq = inside & (np.abs(d) <= w[:, None, None, None]).all(-1)
     normals = edge_normals(gx, gy, sq)  # (N, K, 2)
@@ -265,13 +278,11 @@ def edge_spread(frames, corners, window, shifts=None, reach=None) -> EdgeSpread:
     um = np.where(both, (ua + ub) / 2, np.where(np.isfinite(Fa), ua, ub))
     Fm = np.where(both, (Fa + Fb) / 2, np.where(np.isfinite(Fa), Fa, Fb))
     m1, m2, m3 = (m.reshape(-1, K, 2) for m in _moments(um, Fm, Lr))
-    idx = np.flatnonzero(good)
     for e in range(2):
         out.normal[idx, e::2] = normals[:, :, e]
         out.mean[idx, e::2] = m1[:, :, e]
         out.var[idx, e::2] = m2[:, :, e] - PIXEL_VAR
         out.third[idx, e::2] = m3[:, :, e]
-    return out
 
 
 def _harmonic_fit(y, cols):
