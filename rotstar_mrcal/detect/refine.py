@@ -399,3 +399,27 @@ def refine_symmetric(frames, starts, window=10.0) -> np.ndarray:
 SYMMETRIC = Refiner("symmetric", "rotstar", "the paper's point-symmetry fit (Eq. 1) on all frames jointly",
                     refine_symmetric)
 """The paper's refiner, detect_pose's default"""
+
+
+def symmetric_step(frames: np.ndarray, q: np.ndarray, window: float | np.ndarray = 10, density: int = 4,
+                   seed: int = 0) -> np.ndarray:
+    """(N, 2) the Gauss-Newton step of Eq. 1's cost at corners q (N, 2): -(J'J)^-1 J'r, one evaluation
+
+    Where the optimum is within a small fraction of a pixel of q (a simulated
+    star fitted from where its light is), q plus the step is where
+    symmetric_refine converges, to second order in the distance. NaN where
+    a sample would leave the frames.
+    """
+    frames = _frame_stack(frames)
+    sampler = _Sampler(frames)
+    q = np.asarray(q, float).reshape(-1, 2)
+    w = np.broadcast_to(np.asarray(window, float), (len(q),))
+    out = np.full((len(q), 2), np.nan)
+    wc = np.ceil(np.maximum(w, 1)).astype(int)
+    for g in np.unique(wc):
+        sel = np.flatnonzero(wc == g)
+        D = w[sel, None, None] * unit_offsets(g, seed, density)[None]
+        ok = sampler.inside_box(q[sel], D.min(axis=1), D.max(axis=1))
+        JtJ, Jtr, _ = _normal(*_residuals(sampler, q[sel], D))
+        out[sel[ok]] = -np.linalg.solve(JtJ[ok] + 1e-12 * np.eye(2), Jtr[ok][..., None])[..., 0]
+    return out

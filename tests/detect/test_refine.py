@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rotstar_mrcal.detect.refine import refine_each_frame, symmetric_refine
+from rotstar_mrcal.detect.refine import refine_each_frame, symmetric_refine, symmetric_step
 
 CORNER = np.array([29.6, 30.3])  # x, y
 
@@ -71,3 +71,17 @@ def test_refine_each_frame_is_each_frame_alone():
         np.testing.assert_array_equal(both.sigma[k], one.sigma)
         assert both.reason[k].tolist() == one.reason.tolist()
     assert not both.ok[:, 2].any()
+
+
+def test_one_gauss_newton_step_from_near_the_optimum_is_the_whole_fit():
+    """symmetric_step (psfbias' per-corner simulated fits start it a few thousandths of a px off): to a few percent"""
+    frames = star_frames() + np.random.default_rng(3).normal(0, 0.02, (8, 60, 60)).astype(np.float32)
+    start = np.array([[29.0, 31.0], [30.0, 30.0]])
+    full = symmetric_refine(frames, start, window=[8, 6], tol=1e-6)
+    assert full.ok.all()
+    near = full.corners + np.array([[0.01, -0.006], [-0.008, 0.0]])
+    got = near + symmetric_step(frames, near, [8, 6])
+    assert np.abs(got - full.corners).max() < 5e-4
+    far = full.corners + 0.5  # (it is one step: from far off it is not there)
+    assert np.abs(far + symmetric_step(frames, far, [8, 6]) - full.corners).max() > 1e-3
+    assert np.isnan(symmetric_step(frames, np.array([[3.0, 30.0]]), 8)).all()  # the window leaves the frames

@@ -44,8 +44,9 @@ former piecewise-constant PSF (optics.TiledPSF, PX-px tiles from the rendered
 region's corner; simbias-true then takes the Seidel kernel at the corner),
 --tap-floor F and --star-fft change psfbias's own approximations (the
 kernel taps left out; the FFT rendering of the local star instead of the
-binned one); --phase runs psf-sim with psfbias.PHASE (every corner's own
-sub-pixel phase simulated on its node's star).
+binned one); --no-phase runs psf-sim without psfbias.PHASE (only the 12
+nodes' biases, carried by a smooth field; every corner's own sub-pixel
+phase simulated on its node's star is the default).
 
 Printed: per method the RMS of the corner error against the truth, and its
 pose-dependent part: the error minus the mean error of its image cell
@@ -413,9 +414,10 @@ def main(argv=None):
                    help="render through the former piecewise-constant PSF (TiledPSF, PX-px tiles)")
     p.add_argument("--tap-floor", type=float, help="psfbias.TAP_FLOOR (0: every kernel tap)")
     p.add_argument("--star-fft", action="store_true", help="psfbias renders the local star by FFT (render_star_fft)")
-    p.add_argument("--phase", action="store_true",
-                   help="psf-sim simulates every corner's own sub-pixel phase and window on its node's star, not "
-                        "only the 12 nodes' biases carried by a smooth field (psfbias.PHASE)")
+    p.add_argument("--no-phase", action="store_true",
+                   help="psf-sim simulates only the 12 nodes' biases, carried to the other corners by a smooth "
+                        "field, not every corner's own sub-pixel phase and window on its node's star (psfbias.PHASE "
+                        "False, the default before)")
     p.add_argument("--methods", default="symmetric,psf,saddle")
     p.add_argument("--distance", default="", help="near,far metres (default: random_poses' range)")
     p.add_argument("--coma-from", metavar="NEAR,FAR",
@@ -442,8 +444,8 @@ def main(argv=None):
         psfbias.TAP_FLOOR = a.tap_floor
     if a.star_fft:
         psfbias.STAR_FFT = True
-    if a.phase:
-        psfbias.PHASE = True
+    if a.no_phase:
+        psfbias.PHASE = False
     dist = tuple(float(v) for v in a.distance.split(",")) if a.distance else None
     rts = simulate.random_poses(model, layout, a.npose, np.random.default_rng([3, a.seed]), distance=dist)
     if dist:
