@@ -46,7 +46,7 @@ help:
 	@echo "make display-bench - a display showing the frames like a real monitor (per-frame maps): poses kept, maps, calibration vs a clean display (20 D435 poses)"
 	@echo "make capture-calib-bench - seconds at the screen: today's 25 s capture vs the short one, calibrated vs the truth (about 7 min)"
 	@echo "make glass-bench - a screen's cover glass (0-1.5 mm): plain calibration vs rotstar-calibrate's correction (20/40 poses)"
-	@echo "make blur-map-doc - doc/img/blur-map.png: rotstar-detect --blur-map on a simulated D435 with strong coma"
+	@echo "make blur-map-doc - doc/img/blur-map.png: rotstar-detect --blur-map on a simulated D435 with strong coma; then --refine psf-sim's time per pose against the default (doc/blur-map.md)"
 	@echo "make pip-check   - install with plain pip (scripts/pip_install.sh) into a fresh venv and check it"
 
 python: check-python  ## the Python >= 3.12 the set-up uses (the plain-pip path of README.md uses it too)
@@ -129,6 +129,7 @@ blur-map-doc: setup
 	    --distance 0.18 0.26 --seed 1 --jobs 2 --force
 	$(RUN) rotstar-detect $(BLURMAP_DIR)/seq --blur-map $(BLURMAP_DIR) -o $(BLURMAP_DIR)/corners.vnl --jobs 2
 	cp $(BLURMAP_DIR)/blur_map.png doc/img/blur-map.png
+	$(RUN) $(VENV_BIN)/python scripts/psf_time_bench.py $(BLURMAP_DIR)/seq --runs 5 --doc doc/blur-map.md
 
 pip-check: check-python
 	PYTHON=$(PYTHON) $(VENV_BIN)/python -m pytest -q -s -m slow tests/cli/test_pip_install.py
