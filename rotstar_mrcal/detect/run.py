@@ -231,11 +231,13 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
     rejected = [r for r in results if r.pose in display.moved(max_motion)]
     moved = {r.pose for r in rejected}
     still = [r for r in results if r.found and r.pose not in moved]
-    # the second pass is the symmetric joint refinement; a refiner that corrects its corners (the PSF-aware one)
-    # keeps each pose's own maps
-    if method == "rotstar" and refine.needs == "rotstar" and refine.correct is None and display.offsets is not None:
+    # the second pass is the symmetric joint refinement; a refiner that corrects its corners in the first pass
+    # (psf) keeps each pose's own maps; one that pools (psf-sim) has corrected nothing yet, and corrects after it
+    pools = refine.samples is not None
+    if method == "rotstar" and refine.needs == "rotstar" and (refine.correct is None or pools) \
+            and display.offsets is not None:
         refine_with_dataset_maps(ds, still, display, jobs)
-    if refine.samples is not None:
+    if pools:
         correct_with_dataset(ds.layout, [r.corners for r in still], refine)
     for r in rejected:
         r.error = (f"frames do not align: the camera moved during the sequence (its frames moved "
