@@ -100,8 +100,9 @@ def parse_args(argv=None):
     p.add_argument("--weights", action="store_true",
                    help="detect with per-corner weights (rotstar-detect --weights); a --corners file "
                         "with a weight column is used with weights anyway")
-    p.add_argument("--refine", choices=("symmetric", "opencv", "saddle"), default="symmetric",
-                   help="refinement for the detection (rotstar-detect --refine; default symmetric)")
+    p.add_argument("--refine", choices=("psf-sim", "symmetric", "opencv", "saddle"), default="psf-sim",
+                   help="refinement for the detection (rotstar-detect --refine; default psf-sim, the symmetric "
+                        "fit less its offset under the lens's coma)")
     p.add_argument("--jobs", "-j", type=int, default=1, help="poses detected in parallel (default 1)")
     p.add_argument("--glass", type=number_arg(float, 0, 5), default=None, metavar="MM",
                    help="the screen's cover glass over its pixels, mm (0-5): the calibration is corrected for it "

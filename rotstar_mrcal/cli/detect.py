@@ -52,16 +52,18 @@ example:
 
 
 DETECT_METHODS = ["rotstar"] + [n for n, m in METHODS.items() if m.start == "rotstar"]
+DEFAULT_REFINE = "psf-sim"  # doc/blur-map.md: nearer the light's centroid under coma, the same without it
 
 
-REFINE_HELP = ("symmetric: the paper's Eq. 1 on all rotating-star frames (default); "
+REFINE_HELP = ("symmetric: the paper's Eq. 1 on all rotating-star frames; "
                "opencv: cv2.cornerSubPix on the checkerboard frame; "
                "psf: the symmetric fit moved to the light's centroid, where the 16 edges meet, each placed "
                "at its line-spread function's mean (corners whose window is under 5 px keep the symmetric "
                "fit's; doc/blur-map.md); "
-               "psf-sim: the symmetric fit less its offset from the light's centroid, found by running the "
-               "same fit on the local star rendered through the coma the edges show, pooled over the "
-               "dataset's poses (it needs some views with windows of 4 px or more; doc/blur-map.md); "
+               "psf-sim (default): the symmetric fit less its offset from the light's centroid, found by running "
+               "the same fit on the local star rendered through the coma the edges show, pooled over the "
+               "dataset's poses (without coma, or without views of windows of 4 px or more, the symmetric fit's "
+               "corners; about 1.4 x its time; doc/blur-map.md); "
                "saddle: Lucchese-Mitra saddle fit on the checkerboard frame")
 
 
@@ -73,7 +75,7 @@ def parse_args(argv=None):
     p.add_argument("--window", type=number_arg(float, MIN_WINDOW), default=10.0,
                    help="refinement half-window w in camera pixels (default 10); capped per corner "
                         "so the window stays inside its element")
-    p.add_argument("--refine", choices=REFINERS, default="symmetric", help=REFINE_HELP)
+    p.add_argument("--refine", choices=REFINERS, default=None, help=REFINE_HELP)
     p.add_argument("--method", choices=DETECT_METHODS, default="rotstar",
                    help="whose corners to write, all from the same poses and started from the rotating star's "
                         "labelled corners: " + "; ".join(f"{n}: {METHODS[n].description}" for n in DETECT_METHODS[1:])
@@ -95,8 +97,10 @@ def parse_args(argv=None):
     a = p.parse_args(argv)
     if a.blur_map and os.path.exists(a.blur_map) and not os.path.isdir(a.blur_map):
         p.error(f"--blur-map {a.blur_map}: exists and is not a folder")
-    if a.method != "rotstar" and (a.weights or a.refine != "symmetric"):
+    if a.method != "rotstar" and (a.weights or a.refine is not None):
         p.error(f"--weights and --refine are rotstar's; --method {a.method} gives its own corners")
+    if a.refine is None:
+        a.refine = DEFAULT_REFINE if a.method == "rotstar" else "symmetric"
     return a
 
 
