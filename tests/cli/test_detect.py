@@ -418,6 +418,16 @@ def test_help(run_cli):
         assert word in r.stdout
 
 
+def test_the_default_refiner_is_psf_sim_for_rotstar_s_corners_only():
+    from rotstar_mrcal.cli.detect import parse_args
+
+    assert parse_args(["seq"]).refine == "psf-sim"
+    assert parse_args(["seq", "--refine", "symmetric"]).refine == "symmetric"
+    assert parse_args(["seq", "--method", "phase"]).refine == "symmetric"  # (its start: rotstar's symmetric fit)
+    with pytest.raises(SystemExit):
+        parse_args(["seq", "--method", "phase", "--refine", "symmetric"])
+
+
 def test_bad_option(run_cli):
     r = run_cli("rotstar-detect", "--refine", "nonsense", "seq")
     assert r.returncode == 2 and "invalid choice" in r.stderr and r.stdout == ""
