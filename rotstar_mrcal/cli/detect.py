@@ -233,8 +233,29 @@ def say_checks(a, det) -> None:
         if REFINERS[a.refine].needs == "rotstar" and not (multi and a.quiet):
             for line in d.display.summary().split("\n"):
                 say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{line}")
+        if REFINERS[a.refine].samples is not None and not (multi and a.quiet):
+            say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{pooled_line(a.refine, d)}")
     for pose, why in det.disagree.items():
         say(f"{pose}: skipped in every camera: {why}")
+
+
+def pooled_line(name: str, d) -> str:
+    """What a pooling refiner (psf-sim) measured over the camera's poses and how far it moved the corners"""
+    import numpy as np
+
+    from rotstar_mrcal.detect.pipeline import pooled_corrections
+    from rotstar_mrcal.detect.psfbias import pooled_coma
+
+    found = [r.corners for r in d.found if r.pose not in {x.pose for x in d.rejected}]
+    samples, moved = pooled_corrections(found)
+    n = 0 if samples is None else len(samples[0])
+    if n < 6 or not (moved > 0).any():
+        why = "no pose shows it" if n < 6 else f"not significant over {n} corners"
+        return (f"{name}: no coma ({why}; it is read on corners whose window is 4 px or more): the corners are "
+                f"the symmetric fit's")
+    waves = pooled_coma(samples[0], samples[1], samples[0])[0]
+    return (f"{name}: coma up to {waves.max():.1f} waves (read on {n} corners, pooled over the poses); the corners "
+            f"moved {np.median(moved):.3f} px (median), {moved.max():.3f} px at most, to the light's centroid")
 
 
 def say_boards(det, sparse) -> int:

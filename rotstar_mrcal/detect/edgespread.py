@@ -110,7 +110,7 @@ def _patches(frames, corners, half, shifts):
     py = ic[..., 1, None] + oy.ravel()
     inside = (px >= 0) & (px < W) & (py >= 0) & (py < H)
     x, y = np.clip(px, 0, W - 1), np.clip(py, 0, H - 1)
-    flat = np.ascontiguousarray(frames).reshape(-1)
+    flat = frames.reshape(-1)  # (edge_spread made it contiguous)
     row = np.arange(K)[None, :, None] * (H * W) + y * W  # (np.take on the flat frames: fancy indexing's result,
     v = np.take(flat, row + x)  # at a fraction of its time)
     xl, xr, yu, yd = np.maximum(x - 1, 0), np.minimum(x + 1, W - 1), np.maximum(y - 1, 0), np.minimum(y + 1, H - 1)
@@ -222,7 +222,7 @@ def edge_spread(frames, corners, window, shifts=None, reach=None) -> EdgeSpread:
     reach: L (px), default min(MAX_REACH, REACH_PER_WINDOW x window), a
     whole number of bins.
     """
-    frames = np.asarray(frames, np.float32)
+    frames = np.ascontiguousarray(frames, np.float32)  # (once: _patches reads it flat, group by group)
     frames = frames[None] if frames.ndim == 2 else frames
     q = np.asarray(corners, float).reshape(-1, 2)
     N, K = len(q), len(frames)
@@ -366,6 +366,7 @@ def local_psf(frames, corners, window, shifts=None, reach=None, rounds: int = 2)
     """
     q0 = np.asarray(corners, float).reshape(-1, 2)
     q = q0.copy()
+    frames = np.ascontiguousarray(frames, np.float32)  # (once for the rounds)
     for _ in range(max(int(rounds), 1)):
         es = edge_spread(frames, q, window, shifts, reach)
         est = psf_estimate(es)

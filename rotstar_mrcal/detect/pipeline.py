@@ -404,10 +404,10 @@ def correct_with_dataset(layout: Layout, poses: list[PoseCorners], refine: Refin
     correction, its element Jacobians those of its corners' homography.
     detect_camera's first pass leaves the corrections to this (corners_as_they_are).
     """
-    have = [p for p in poses if p.samples is not None and p.correction is not None]
-    if not have:
+    pooled, _ = pooled_corrections(poses)
+    if pooled is None:
         return
-    pooled = tuple(np.concatenate([p.samples[i] for p in have]) for i in (0, 1))
+    have = [p for p in poses if p.samples is not None and p.correction is not None]
     angles = np.array([layout.angle(k) for k in range(layout.nframes)])
     for p in have:
         j, i = np.nonzero(np.isfinite(p.corners[..., 0]) & np.isfinite(p.correction[..., 0]))
@@ -420,3 +420,20 @@ def correct_with_dataset(layout: Layout, poses: list[PoseCorners], refine: Refin
                              lowpass_sigma=p.prefilter_px)
         p.corners[j, i] = new
         p.correction[j, i] = new - q
+
+
+def pooled_corrections(poses: list[PoseCorners]) -> tuple[tuple[np.ndarray, ...] | None, np.ndarray]:
+    """(every pose's refine.samples pooled, or None; the lengths (M,) of the corrections correct_with_dataset made)
+
+    >>> p = PoseCorners(np.zeros((1, 2, 2)), samples=(np.zeros((1, 2)), np.ones((1, 2))),
+    ...                 correction=np.array([[[0.03, 0.04], [np.nan, np.nan]]]))
+    >>> s, moved = pooled_corrections([p, PoseCorners(np.zeros((1, 2, 2)))])
+    >>> len(s[0]), moved.round(3).tolist()
+    (1, [0.05])
+    """
+    have = [p for p in poses if p.samples is not None and p.correction is not None]
+    if not have:
+        return None, np.zeros(0)
+    pooled = tuple(np.concatenate([p.samples[i] for p in have]) for i in range(len(have[0].samples)))
+    moved = np.concatenate([np.linalg.norm(p.correction, axis=-1).ravel() for p in have])
+    return pooled, moved[np.isfinite(moved)]

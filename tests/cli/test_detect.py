@@ -476,6 +476,8 @@ def test_weights_column(good_seq, d435_seq, run_cli, tmp_path):
     L = d435_seq.layout
     r = run_cli("rotstar-detect", "--weights", seq, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
+    # (the default, psf-sim, on a lens without coma: the symmetric fit's corners, and it says so)
+    assert "rotstar-detect: psf-sim: no coma (" in r.stderr and "the corners are the symmetric fit's" in r.stderr
     lines = r.stdout.splitlines()
     assert lines[0] == "# filename x y weight"
     w = np.array([float(line.split()[3]) for line in lines[1:]])
@@ -533,7 +535,6 @@ def test_frame_size_read_from_the_pgm_header(tmp_path, size):
         dataset.read_image(fn)
 
 
-@pytest.mark.slow
 def test_blur_map_and_psf_refine_under_coma(run_cli, tmp_path):
     """--blur-map DIR writes the table and the picture; the widths and coma directions are the lens's;
     --refine psf and psf-sim bring the corners nearer the light's centroid than the symmetric fit (near views,
@@ -556,6 +557,7 @@ def test_blur_map_and_psf_refine_under_coma(run_cli, tmp_path):
                     tmp_path / f"{refine}.vnl", seq, cwd=tmp_path)
         assert r.returncode == 0, r.stderr
         assert "blur map of" in r.stderr
+        assert ("rotstar-detect: psf-sim: coma up to " in r.stderr) == (refine == "psf-sim"), r.stderr
         boards = boards_of((tmp_path / f"{refine}.vnl").read_text(), seq, layout)
         err[refine] = np.concatenate([np.linalg.norm(boards[p] - truth[p], axis=-1).ravel() for p in truth])
     rms = {k: float(np.sqrt(np.nanmean(v ** 2))) for k, v in err.items()}
