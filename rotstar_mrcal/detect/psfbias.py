@@ -487,8 +487,8 @@ NODES = 12  # corners per pose where the bias is simulated; a smooth field carri
 DEGREE = 2  # of that field
 PHASE = True  # bias_correct: every corner's own sub-pixel phase and window simulated on its node's star
 PHASE_ANGLE_STEP = math.radians(5.0)  # ... through a kernel at its coma's angle rounded to this
-# (doc/blur-map.md: on 10 near poses, noiseless, it takes the pooled pose-dependent part from 0.64 x to 0.41 x of
-# the symmetric fit's at coma 1.5; False: the nodes' biases alone, carried by the smooth field)
+# (doc/blur-map.md: on 10 near poses under coma 1.5, noiseless, the pooled correction leaves 0.41 x the symmetric
+# fit's pose-dependent part; False: the nodes' biases alone, carried by the smooth field)
 MAX_SAMPLES = 64  # corners per pose whose coma coma_samples reads
 COMA_SIGNIFICANCE = 3.0  # a pooled coma below this many standard deviations of its plane is taken as 0
 
