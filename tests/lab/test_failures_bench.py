@@ -37,8 +37,8 @@ def test_tables_and_findings():
         "tilt": {"0, 0": {"star": stats(0.05)}, "70, 45": {"star": stats(0.5, found=4, wrong=2)}},
     }
     t = F.table(summary, "saturation")
-    assert t.splitlines()[0] == "| gain | rotstar | phase | phase, keep clipped | star | saddle |"
-    assert "| 1.4 | 0.060 / 0.120 (100%) | - (0%) | 0.300 / 0.600 (100%) | 0.090 / 0.180 (100%) |  |" in t
+    assert t.splitlines()[0] == "| gain | rotstar | rotstar, psf-sim | phase | phase, keep clipped | star | saddle |"
+    assert "| 1.4 | 0.060 / 0.120 (100%) |  | - (0%) | 0.300 / 0.600 (100%) | 0.090 / 0.180 (100%) |  |" in t
     assert "gain 1.4, phase: 10 saturated" in F.rejections(summary, "saturation")
     assert F.rejections(summary, "gamma") == "No corner was rejected."
     f = F.findings(summary)
@@ -73,7 +73,8 @@ def test_tiny_run():
     s = F.summarize(F.run_units(pick, jobs=1, seed=0, model=model, layout=layout, psf=1.0))
     assert list(s) == ["saturation", "gamma", "tilt", "noise"]
     assert list(s["saturation"]) == ["0.7", "1", "1.2", "1.4"] and list(s["gamma"]) == ["1.8", "2.2"]
-    assert list(s["tilt"]) == ["70, 45"] and list(s["tilt"]["70, 45"]) == ["rotstar", "star", "saddle"]
+    assert list(s["tilt"]) == ["70, 45"] and list(s["tilt"]["70, 45"]) == ["rotstar", "rotstar-psf-sim", "star",
+                                                                          "saddle"]
     n = layout.nx * layout.ny
     for t in s.values():
         for row in t.values():

@@ -31,7 +31,9 @@ paper's fairness rule: every method gets 8 captures' worth of light).
 
 Every method sees the same rendered images of a pose and condition:
 
-    rotstar        METHODS['rotstar'] on the 8 frames (finds and labels its own board)
+    rotstar        METHODS['rotstar'] on the 8 frames (finds and labels its own board): the paper's fit
+    rotstar, psf-sim  METHODS['rotstar-psf-sim']: that fit less its offset under the coma this pose's
+                   edges show (rotstar-detect's default pools the coma over a dataset's poses)
     phase          METHODS['phase'] (detect.phase, clipped windows rejected)
     phase, keep    detect.phase.phase_corners(saturation='keep'): clipped samples used as they are
     star           METHODS['star'] (symmetric refinement on the one star frame)
@@ -92,13 +94,13 @@ NOISES = ((0.01, 1e-4), (0.03, 1e-4), (0.01, 1e-3))  # (read noise, shot noise)
 CAPTURES = 8
 MARGIN_PX = 20.0
 TABLES = {  # table: (title of its rows, methods)
-    "saturation": ("gain", ("rotstar", "phase", "phase-keep", "star", "saddle")),
-    "gamma": ("screen gamma", ("rotstar", "phase", "star")),
-    "tilt": ("tilt, roll", ("rotstar", "star", "saddle")),
-    "noise": ("read, shot noise", ("rotstar", "phase", "star", "saddle")),
+    "saturation": ("gain", ("rotstar", "rotstar-psf-sim", "phase", "phase-keep", "star", "saddle")),
+    "gamma": ("screen gamma", ("rotstar", "rotstar-psf-sim", "phase", "star")),
+    "tilt": ("tilt, roll", ("rotstar", "rotstar-psf-sim", "star", "saddle")),
+    "noise": ("read, shot noise", ("rotstar", "rotstar-psf-sim", "phase", "star", "saddle")),
 }
-TITLES = {"rotstar": "rotstar", "phase": "phase", "phase-keep": "phase, keep clipped", "star": "star",
-          "saddle": "saddle"}
+TITLES = {"rotstar": "rotstar", "rotstar-psf-sim": "rotstar, psf-sim", "phase": "phase",
+          "phase-keep": "phase, keep clipped", "star": "star", "saddle": "saddle"}
 
 
 @dataclasses.dataclass(frozen=True)
