@@ -137,6 +137,11 @@ def detect_corners(a) -> tuple[str | None, int]:
     if not det.results():
         say(f"rotstar-calibrate: {a.seq}: no pose folders with frames from pattern.json")
         return None, 2
+    if REFINERS[a.refine].samples is not None:  # psf-sim: what it measured and how far it moved the corners
+        from rotstar_mrcal.cli.detect import pooled_line
+
+        for k, d in det.cameras.items():
+            say(f"rotstar-calibrate: {dataset.camera_folder(k) + ': ' if multi else ''}{pooled_line(a.refine, d)}")
     with atomic_write(vnl) as f:
         sparse = {s.file for s in write_corners(f, det.boards(), det.weights() if a.weights else None)}
     boards = [f for f, grid in det.boards() if grid is not None and f not in sparse]

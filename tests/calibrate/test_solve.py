@@ -32,6 +32,7 @@ def test_detects_calibrates_and_prints_what_it_runs(calibrated, d435_seq):
     assert model_path == os.path.join(out, "camera-0.cameramodel") and os.path.exists(model_path)
     cmds = [line for line in r.stderr.splitlines() if line.startswith("$ ")]
     assert cmds[0].startswith("$ rotstar-detect ") and cmds[1].startswith("$ mrcal-calibrate-cameras ")
+    assert "--refine psf-sim" in cmds[0] and "rotstar-calibrate: psf-sim: " in r.stderr  # the default, and what it did
     assert "--object-width-n 14 --object-height-n 9" in cmds[1] and "--imagersize 1280 800" in cmds[1]
     assert "--lensmodel LENSMODEL_OPENCV5" in cmds[1] and "'*/rotstar_00.png'" in cmds[1]
     model = mrcal.cameramodel(model_path)
