@@ -54,6 +54,12 @@ Validate calibrations the way the rotating-star paper and mrcal do it.
       each with the true camera. With --methods (datasets only) or --set, the
       same for several corner sets of the same poses, side by side.
 
+A dataset is detected as rotstar-detect does by default (--refine psf-sim:
+the symmetric fit less its offset under the lens's coma), as the corner set
+"rotstar". With --methods the registry's names hold: "rotstar" is the
+paper's symmetric fit (rotstar-detect --refine symmetric) and
+"rotstar-psf-sim" rotstar-detect's default.
+
 Commands are printed on stderr before they run. stdout gets the results
 table (Markdown) or, with --json, the results. With --outdir, the models,
 the figures (PNG) and results.json are written there; rotstar-report turns
@@ -153,28 +159,54 @@ def _write_json(obj, path=None):
             f.write(text)
 
 
-def detect_commands(seq: str, methods, outdir: str, side: str) -> list[str]:
+DEFAULT_SET = "rotstar"  # the corner set without --methods: what rotstar-detect writes by default ...
+DEFAULT_METHOD = "rotstar-psf-sim"  # ... (its default refiner, psf-sim; with --methods, "rotstar" is the paper's fit)
+
+
+def detect_args(m: str) -> list[str] | None:
+    """rotstar-detect's options that give method m's corners, or None (a detector of no command of ours)
+
+    >>> detect_args("rotstar"), detect_args("rotstar-psf-sim"), detect_args("star"), detect_args("mrgingham")
+    (['--refine', 'symmetric'], ['--refine', 'psf-sim'], ['--method', 'star'], None)
+    """
+    if m == "rotstar":
+        return ["--refine", "symmetric"]
+    if m == "rotstar-psf-sim":
+        return ["--refine", "psf-sim"]
+    return ["--method", m] if m in DETECT_METHODS else None
+
+
+def detect_commands(seq: str, methods, outdir: str, side: str, folders: dict | None = None) -> list[str]:
     """The rotstar-detect commands that write the corners detect_dataset writes here, in this
     process (the methods rotstar-detect has; the other detectors have no command of ours)
 
     SYNOPSIS
 
         >>> detect_commands("seq", ["rotstar", "mrgingham"], "xval", "A")
-        ['rotstar-detect seq --method rotstar -o xval/rotstar/A.vnl']
+        ['rotstar-detect seq --refine symmetric -o xval/rotstar/A.vnl']
+        >>> detect_commands("seq", [DEFAULT_METHOD], "xval", "B", {DEFAULT_METHOD: DEFAULT_SET})
+        ['rotstar-detect seq --refine psf-sim -o xval/rotstar/B.vnl']
     """
-    return [cal.command_line(["rotstar-detect", seq, "--method", m, "-o", os.path.join(outdir, m, f"{side}.vnl")])
-            for m in methods if m in DETECT_METHODS]
+    return [cal.command_line(["rotstar-detect", seq, *detect_args(m), "-o",
+                              os.path.join(outdir, (folders or {}).get(m, m), f"{side}.vnl")])
+            for m in methods if detect_args(m) is not None]
 
 
-def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1) -> dict[str, str]:
+def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1,
+                   folders: dict | None = None) -> dict[str, str]:
     """validate.detection.detect_dataset with progress lines on stderr, after the commands that do the same"""
     n = len(dataset.list_poses(seq))
-    for c in detect_commands(seq, methods, outdir, side):
+    for c in detect_commands(seq, methods, outdir, side, folders):
         say(f"$ {c}    # (run here, in this process)")
     say(f"rotstar-crossval: detecting {', '.join(methods)} on {seq} ({n} poses)")
     progress = Progress(n)
     return _detect_dataset(seq, methods, outdir, side, jobs, progress=progress.step,
-                           log=lambda line: say(f"rotstar-crossval: {line}"))
+                           log=lambda line: say(f"rotstar-crossval: {line}"), folders=folders)
+
+
+def detect_default(seq: str, outdir: str, side: str, jobs: int = 1) -> str:
+    """The default corner set of a dataset (rotstar-detect's default output), as outdir/rotstar/<side>.vnl"""
+    return detect_dataset(seq, [DEFAULT_METHOD], outdir, side, jobs, {DEFAULT_METHOD: DEFAULT_SET})[DEFAULT_METHOD]
 
 
 # ---------------------------------------------------------------------------
@@ -186,7 +218,7 @@ def mode_heldout(a, model_path: str, test: str) -> int:
     if _kind(test) == "dataset":
         if a.outdir is None:
             tmp = tempfile.TemporaryDirectory(prefix="rotstar-crossval-")
-        vnl = detect_dataset(test, ["rotstar"], a.outdir or tmp.name, "test", a.jobs)["rotstar"]
+        vnl = detect_default(test, a.outdir or tmp.name, "test", a.jobs)
     else:
         vnl = test
     try:
@@ -303,7 +335,7 @@ def corner_sets(a, kinds) -> dict:
 
 def split_recording(a, path: str, kind: str) -> tuple[str, str]:
     """One recording (a dataset or a corners.vnl) split into two interleaved groups: their vnl files"""
-    vnl = detect_dataset(path, ["rotstar"], a.outdir, "all", a.jobs)["rotstar"] if kind == "dataset" else path
+    vnl = detect_default(path, a.outdir, "all", a.jobs) if kind == "dataset" else path
     va, vb = (os.path.join(a.outdir, "rotstar", f"{s}.vnl") for s in "AB")
     na, nb = split_interleaved(vnl, va, vb)
     say(f"rotstar-crossval: split {vnl} into {va} ({na} boards) and {vb} ({nb} boards), interleaved")
@@ -314,8 +346,8 @@ def split_recording(a, path: str, kind: str) -> tuple[str, str]:
 def group_sets(a, kinds) -> dict:
     """The corner sets of two pose groups A and B: rotstar's, or with --methods each method's"""
     if not a.methods:
-        return {"rotstar": tuple(detect_dataset(path, ["rotstar"], a.outdir, side, a.jobs)["rotstar"]
-                                 if k == "dataset" else path for side, path, k in zip("AB", a.inputs, kinds))}
+        return {DEFAULT_SET: tuple(detect_default(path, a.outdir, side, a.jobs)
+                                   if k == "dataset" else path for side, path, k in zip("AB", a.inputs, kinds))}
     known = dataset_methods()
     methods = known if a.methods == "all" else [m.strip() for m in a.methods.split(",")]
     bad = [m for m in methods if m not in known]

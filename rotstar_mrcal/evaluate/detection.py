@@ -52,8 +52,12 @@ def moved_poses(res: dict, max_motion: float = MAX_MOTION) -> list[str]:
 
 
 def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1, progress=None,
-                   log=None) -> dict[str, str]:
+                   log=None, folders: dict | None = None) -> dict[str, str]:
     """Detect every method on a dataset; write outdir/<method>/<side>.vnl; {method: vnl}
+
+    folders: {method: folder name} for methods written under another name
+    (rotstar-crossval writes rotstar-detect's default, rotstar-psf-sim, as
+    its corner set "rotstar").
 
     progress(pose, message) is called as each pose is done; log(line) for a
     pose dropped afterwards because its camera moved (moved_poses: every
@@ -84,7 +88,7 @@ def detect_dataset(seq: str, methods, outdir: str, side: str, jobs: int = 1, pro
             _, rfile, cbfile, _ = res[p]
             boards.append((rfile if m.startswith("rotstar") else cbfile, f.corners))
             weights.append(f.weights)
-        path = os.path.join(outdir, m, f"{side}.vnl")
+        path = os.path.join(outdir, (folders or {}).get(m, m), f"{side}.vnl")
         os.makedirs(os.path.dirname(path), exist_ok=True)
         with atomic_write(path) as f:
             write_corners(f, boards, weights if m == "rotstar-weighted" else None)

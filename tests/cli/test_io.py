@@ -136,8 +136,15 @@ def test_crossval_prints_the_detection_it_runs(seq, tmp_path, capsys):
 
     vnl = crossval.detect_dataset(seq, ["rotstar"], str(tmp_path / "x"), "A")["rotstar"]
     cmd = [line for line in capsys.readouterr().err.splitlines() if line.startswith("$ ")]
-    assert cmd == [f"$ rotstar-detect {seq} --method rotstar -o {vnl}    # (run here, in this process)"]
+    assert cmd == [f"$ rotstar-detect {seq} --refine symmetric -o {vnl}    # (run here, in this process)"]
     again = str(tmp_path / "again.vnl")
+    r = cli("rotstar-detect", *cmd[0].split("#")[0].split()[2:-1], again)
+    assert r.returncode == 0 and open(again).read() == open(vnl).read()
+    # the default corner set: rotstar-detect's default, psf-sim, under the name rotstar
+    vnl = crossval.detect_default(seq, str(tmp_path / "y"), "B")
+    cmd = [line for line in capsys.readouterr().err.splitlines() if line.startswith("$ ")]
+    assert vnl == str(tmp_path / "y" / "rotstar" / "B.vnl")
+    assert cmd == [f"$ rotstar-detect {seq} --refine psf-sim -o {vnl}    # (run here, in this process)"]
     r = cli("rotstar-detect", *cmd[0].split("#")[0].split()[2:-1], again)
     assert r.returncode == 0 and open(again).read() == open(vnl).read()
 
