@@ -332,9 +332,9 @@ def table(summary: dict, name: str) -> str:
 
         >>> s = {"gamma": {"2.6": {"phase": corner_stats([0.1, 0.3], ["", ""])}}}
         >>> print(table(s, "gamma"))
-        | screen gamma | rotstar | phase | star |
-        |---|---|---|---|
-        | 2.6 |  | 0.224 / 0.290 (100%) |  |
+        | screen gamma | rotstar | rotstar, psf-sim | phase | star |
+        |---|---|---|---|---|
+        | 2.6 |  |  | 0.224 / 0.290 (100%) |  |
     """
     rows = summary.get(name, {})
     methods = TABLES[name][1]
