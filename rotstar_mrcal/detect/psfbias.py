@@ -162,7 +162,9 @@ def star_light(kernels: np.ndarray, s: int, normals: np.ndarray) -> tuple[np.nda
     """(T (N, K, nb + 1, nb + 1), R px) the joint survival function of (n1 . T, n2 . T) per corner and frame
 
     T[n, k, i, j]: the light of kernel n (with the pixel's box) whose projections on frame k's two normals
-    are in bins >= i and >= j of the BIN_UV grid that starts at -R (render_star).
+    are in bins >= i and >= j of the BIN_UV grid that starts at -R (render_star). Summed in float64, kept in
+    float32 (star_pixels reads it so: a tenth of its precision is 1e-7 of the light, and the patches are
+    fitted in float32).
     """
     N, K = normals.shape[:2]
     kh, kw = kernels.shape[1:]
@@ -186,7 +188,7 @@ def star_light(kernels: np.ndarray, s: int, normals: np.ndarray) -> tuple[np.nda
             wv = f[:, :, 1] if dv else 1 - f[:, :, 1]
             idx = base + (i0[:, :, 0] + du) * nb + i0[:, :, 1] + dv
             acc += np.bincount(idx.ravel(), (m[:, None, :] * wu * wv).ravel(), minlength=N * K * nb * nb)
-    T = np.zeros((N, K, nb + 1, nb + 1))  # T[i, j]: the light of bins >= i along n1 and >= j along n2
+    T = np.zeros((N, K, nb + 1, nb + 1), np.float32)  # T[i, j]: the light of bins >= i along n1 and >= j along n2
     T[:, :, :nb, :nb] = acc.reshape(N, K, nb, nb)[:, :, ::-1, ::-1].cumsum(2).cumsum(3)[:, :, ::-1, ::-1]
     return T, R
 
@@ -199,8 +201,7 @@ def star_pixels(light: tuple[np.ndarray, float], normals: np.ndarray, frac: np.n
     """
     T, R = light
     nb = T.shape[-1] - 1
-    nrm = (normals[source] / BIN_UV).astype(np.float32)  # in bins (float32: a tenth of the table's precision is
-    # 1e-7 of its light, and the patches are fitted in float32)
+    nrm = (normals[source] / BIN_UV).astype(np.float32)  # in bins, in float32 as the table (star_light)
     o = np.arange(-half, half + 1, dtype=np.float32)
     px = (o[None, :] - frac[:, 0, None].astype(np.float32))[:, None, None, None, :]  # (n, 1, 1, 1, P)
     py = (o[None, :] - frac[:, 1, None].astype(np.float32))[:, None, None, :, None]
@@ -211,7 +212,7 @@ def star_pixels(light: tuple[np.ndarray, float], normals: np.ndarray, frac: np.n
     g = xa - j
     j = j.astype(np.intp)
     m = nb + 1
-    flat = _flat32(T)
+    flat = T.reshape(-1)
     base = ((np.asarray(source)[:, None] * T.shape[1] + np.arange(nrm.shape[1])[None]) * m * m)[:, :, None, None]
     ja, jb, ga, gb = j[:, :, 0], j[:, :, 1], g[:, :, 0], g[:, :, 1]
     ia = base + ja * m  # (row starts)
@@ -227,18 +228,6 @@ def star_pixels(light: tuple[np.ndarray, float], normals: np.ndarray, frac: np.n
     pv = at(base + jb)
     pv += gb * (at(base + jb + 1) - pv)
     return 1 - 2 * pu - 2 * pv + 4 * both
-
-
-_FLAT32: dict = {}
-
-
-def _flat32(T: np.ndarray) -> np.ndarray:
-    """T flattened in float32 (kept for the table last asked for: one pose's stars read it several times)"""
-    key = id(T)
-    if key not in _FLAT32 or _FLAT32[key][0] is not T:
-        _FLAT32.clear()
-        _FLAT32[key] = (T, T.reshape(-1).astype(np.float32))
-    return _FLAT32[key][1]
 
 
 CHUNK = 32  # corners per mosaic fitted at once
