@@ -137,7 +137,7 @@ def detect_corners(a) -> tuple[str | None, int]:
     if not det.results():
         say(f"rotstar-calibrate: {a.seq}: no pose folders with frames from pattern.json")
         return None, 2
-    if REFINERS[a.refine].samples is not None:  # psf-sim: what it measured and how far it moved the corners
+    if REFINERS[a.refine].pools:  # psf-sim: what it measured and how far it moved the corners
         from rotstar_mrcal.cli.detect import pooled_line
 
         for k, d in det.cameras.items():

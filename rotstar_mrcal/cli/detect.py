@@ -233,7 +233,7 @@ def say_checks(a, det) -> None:
         if REFINERS[a.refine].needs == "rotstar" and not (multi and a.quiet):
             for line in d.display.summary().split("\n"):
                 say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{line}")
-        if REFINERS[a.refine].samples is not None and not (multi and a.quiet):
+        if REFINERS[a.refine].pools and not (multi and a.quiet):
             say(f"rotstar-detect: {dataset.camera_folder(k) + ': ' if multi else ''}{pooled_line(a.refine, d)}")
     for pose, why in det.disagree.items():
         say(f"{pose}: skipped in every camera: {why}")
@@ -246,8 +246,8 @@ def pooled_line(name: str, d) -> str:
     from rotstar_mrcal.detect.pipeline import pooled_corrections
     from rotstar_mrcal.detect.psfbias import pooled_coma
 
-    found = [r.corners for r in d.found if r.pose not in {x.pose for x in d.rejected}]
-    samples, moved = pooled_corrections(found)
+    samples, moved = pooled_corrections([r.corners for r in d.found])  # (a pose the motion check rejected is
+    # not found)
     n = 0 if samples is None else len(samples[0])
     if n < 6 or not (moved > 0).any():
         why = "no pose shows it" if n < 6 else f"not significant over {n} corners"

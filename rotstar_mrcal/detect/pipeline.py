@@ -404,10 +404,9 @@ def correct_with_dataset(layout: Layout, poses: list[PoseCorners], refine: Refin
     correction, its element Jacobians those of its corners' homography.
     detect_camera's first pass leaves the corrections to this (corners_as_they_are).
     """
-    pooled, _ = pooled_corrections(poses)
-    if pooled is None:
+    have, pooled = _pooling(poses)
+    if not have:
         return
-    have = [p for p in poses if p.samples is not None and p.correction is not None]
     angles = np.array([layout.angle(k) for k in range(layout.nframes)])
     for p in have:
         j, i = np.nonzero(np.isfinite(p.corners[..., 0]) & np.isfinite(p.correction[..., 0]))
@@ -431,9 +430,16 @@ def pooled_corrections(poses: list[PoseCorners]) -> tuple[tuple[np.ndarray, ...]
     >>> len(s[0]), moved.round(3).tolist()
     (1, [0.05])
     """
-    have = [p for p in poses if p.samples is not None and p.correction is not None]
+    have, pooled = _pooling(poses)
     if not have:
         return None, np.zeros(0)
-    pooled = tuple(np.concatenate([p.samples[i] for p in have]) for i in range(len(have[0].samples)))
     moved = np.concatenate([np.linalg.norm(p.correction, axis=-1).ravel() for p in have])
     return pooled, moved[np.isfinite(moved)]
+
+
+def _pooling(poses: list[PoseCorners]) -> tuple[list[PoseCorners], tuple[np.ndarray, ...] | None]:
+    """(the poses a pooling refiner measured, their refine.samples concatenated or None)"""
+    have = [p for p in poses if p.samples is not None and p.correction is not None]
+    if not have:
+        return have, None
+    return have, tuple(np.concatenate([p.samples[i] for p in have]) for i in range(len(have[0].samples)))

@@ -383,6 +383,11 @@ class Refiner:
     # pose (psf-sim: the corners' coma, psfbias.coma_samples), handed back as correct(..., samples=); a dataset
     # pools them over its poses and corrects every pose again with the pool (pipeline.correct_with_dataset)
 
+    @property
+    def pools(self) -> bool:
+        """True for a refiner whose correction pools a dataset's poses (it has samples): psf-sim"""
+        return self.samples is not None
+
 
 def refine_symmetric(frames, starts, window=10.0) -> np.ndarray:
     """The paper's Eq. 1 (symmetric_refine) on all frames jointly

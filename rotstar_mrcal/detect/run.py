@@ -214,7 +214,7 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
     """
     poses = ds.poses[k]
     # a refiner whose correction pools the poses' measurements measures in the first pass and corrects after it
-    first = refine if refine.samples is None else dataclasses.replace(refine, correct=corners_as_they_are)
+    first = dataclasses.replace(refine, correct=corners_as_they_are) if refine.pools else refine
     opts = dict(window=window, refine=first, max_motion=max_motion, method=method, blur_map=blur_map)
     done: dict[str, PoseResult] = {}
     for r in process_map(detect_one, [(ds.path, p, ds.frames, ds.layout, opts) for p in poses], jobs):
@@ -233,11 +233,10 @@ def detect_camera(ds: Dataset, k: int = 0, *, window: float = 10.0, refine: Refi
     still = [r for r in results if r.found and r.pose not in moved]
     # the second pass is the symmetric joint refinement; a refiner that corrects its corners in the first pass
     # (psf) keeps each pose's own maps; one that pools (psf-sim) has corrected nothing yet, and corrects after it
-    pools = refine.samples is not None
-    if method == "rotstar" and refine.needs == "rotstar" and (refine.correct is None or pools) \
+    if method == "rotstar" and refine.needs == "rotstar" and (refine.correct is None or refine.pools) \
             and display.offsets is not None:
         refine_with_dataset_maps(ds, still, display, jobs)
-    if pools:
+    if refine.pools:
         correct_with_dataset(ds.layout, [r.corners for r in still], refine)
     for r in rejected:
         r.error = (f"frames do not align: the camera moved during the sequence (its frames moved "

@@ -186,7 +186,7 @@ def _rotstar_refined(refine: Refiner):
     def run(p: PoseImages) -> Found:
         r = detect_pose(np.asarray(p.frames, np.float32), p.layout, full_scale=p.full_scale, window=p.window,
                         identity=p.identity, refine=refine)
-        pooled = refine.samples is not None and r.found
+        pooled = refine.pools and r.found
         return Found(r.corners if r.found else None, None, r.error, r.shifts, pose=r if pooled else None)
     return run
 
@@ -375,7 +375,7 @@ def pooled(name: str, layout: Layout, found: list[Found]) -> list[Found]:
     ''
     """
     refine = METHODS[name].refiner if name in METHODS else None
-    if refine is None or refine.samples is None:
+    if refine is None or not refine.pools:
         return found
     poses = [f.pose for f in found if f.pose is not None and f.corners is not None]
     correct_with_dataset(layout, poses, refine)  # in place: each Found's pose holds its corners
