@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -66,8 +67,7 @@ def main(argv=None) -> int:
     cpus = sorted(os.sched_getaffinity(0))
     cpu = cpus[-1] if a.cpu is None else a.cpu
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    pin = ["taskset", "-c", str(cpu)] if subprocess.run(["which", "taskset"], capture_output=True).returncode == 0 \
-        else []
+    pin = ["taskset", "-c", str(cpu)] if shutil.which("taskset") else []
     times: dict[str, list[float]] = {m: [] for m, _ in METHODS}
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory() as tmp:
